@@ -1,0 +1,1 @@
+"""The standalone render core: numpy, embreex and numba, never bpy."""

@@ -1,0 +1,87 @@
+"""Ray-scene intersection on Embree (embreex).
+
+One :class:`Accel` per static triangle set (one velocity group), built once and
+reused for every frame of an animation.  All vectors here are in the frame in which
+the triangles are at rest (the lab frame for static scenes).
+
+Embree facts this module relies on (measured with embreex 4.4, see architecture.md):
+
+- ``run`` loops over single rays without the GIL, so Python threads trace in parallel;
+- the BVH is built lazily *with* the GIL held: :meth:`Accel.warm_up` builds it before
+  any worker thread starts;
+- ``tnear`` is 0, so callers offset ray origins themselves;
+- ``query="OCCLUDED"`` returns 0 for a blocked ray and -1 for a free one, and
+  ``dists`` bounds the segment.
+
+Geometry is stored in float32 *relative to* ``origin`` (the scene's bounding-box
+centre), so rays far from the world origin keep their precision near the geometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from embreex import mesh_construction, rtcore_scene
+
+MISS_DISTANCE = np.float32(1e30)
+
+
+@dataclass
+class Hits:
+    """Nearest hits of a batch of rays (rest-frame quantities).
+
+    ``t`` is the distance along the unit direction (``MISS_DISTANCE`` where nothing
+    was hit), ``prim`` the triangle index (-1 on a miss), ``u, v`` the barycentric
+    coordinates of the hit on that triangle.
+    """
+
+    t: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+
+class Accel:
+    """A committed Embree scene over ``triangles`` (float32 (T,3,3))."""
+
+    def __init__(self, triangles: np.ndarray, robust: bool = False):
+        tris = np.asarray(triangles, dtype=np.float64)
+        if tris.ndim != 3 or tris.shape[1:] != (3, 3) or len(tris) == 0:
+            raise ValueError("Accel needs a non-empty (T, 3, 3) triangle array")
+        lo, hi = tris.reshape(-1, 3).min(0), tris.reshape(-1, 3).max(0)
+        self.origin = 0.5 * (lo + hi)
+        self.extent = float(np.max(hi - lo))
+        self._scene = rtcore_scene.EmbreeScene(robust=robust)
+        local = np.ascontiguousarray((tris - self.origin).astype(np.float32))
+        self._mesh = mesh_construction.TriangleMesh(self._scene, local)
+        self.n_triangles = len(tris)
+        self.warm_up()
+
+    def warm_up(self) -> None:
+        """Build the BVH now, with the GIL held, before threads use the scene."""
+        o = np.zeros((1, 3), np.float32)
+        d = np.array([[0.0, 0.0, 1.0]], np.float32)
+        self._scene.run(o, d, query="OCCLUDED")
+
+    def local(self, points: np.ndarray) -> np.ndarray:
+        """Lab points -> the float32 coordinates the BVH stores (translated by -origin)."""
+        return np.ascontiguousarray((np.asarray(points, np.float64) - self.origin), np.float32)
+
+    def intersect(self, o_local: np.ndarray, d: np.ndarray) -> Hits:
+        """Nearest hit of rays ``o_local + t d`` (origins already in local coordinates)."""
+        if len(o_local) == 0:
+            e = np.empty(0, np.float32)
+            return Hits(e, np.empty(0, np.int32), e, e)
+        r = self._scene.run(o_local, d, output=1)
+        prim = r["primID"]
+        t = np.where(prim >= 0, r["tfar"], MISS_DISTANCE).astype(np.float32)
+        return Hits(t, prim, r["u"], r["v"])
+
+    def occluded(self, o_local: np.ndarray, d: np.ndarray, tmax: np.ndarray) -> np.ndarray:
+        """True where the segment ``o_local + t d``, 0 < t < tmax, is blocked."""
+        if len(o_local) == 0:
+            return np.empty(0, bool)
+        r = self._scene.run(o_local, d, dists=np.ascontiguousarray(tmax, np.float32),
+                            query="OCCLUDED")
+        return r == 0

@@ -1,0 +1,148 @@
+"""BSDFs as numba device functions: Lambert, GGX conductor, smooth dielectric.
+
+Every lobe answers the same questions (Mitsuba 3's ``eval``/``pdf``/``sample``) with
+world-space unit vectors in the frame where the surface is at rest (the lab for static
+scenes); ``n`` is the shading normal turned towards ``wo`` (surfaces are two-sided).
+Spectral dependence enters only through the reflectance ρ(λ) of each hero lane, so the
+functions return scalar factors and the integrator forms, per lane j,
+
+    f_j = k_d ρ_j + k_m (ρ_j + (1 - ρ_j) s)          (s = (1 - wi·h)⁵, Schlick)
+
+Job-format keys served (``[[materials]]``): ``base_color`` → ρ; ``metallic`` m,
+``transmission`` t → lobe weights w_d = (1-m)(1-t), w_m = m, w_g = (1-m)t (they sum to 1,
+a simplified Principled BSDF without the dielectric coat); ``roughness`` r → GGX
+α = r² (clamped to ≥ 1e-3; below ``DELTA_ALPHA`` the conductor is a perfect mirror);
+``ior`` → the smooth dielectric (wavelength-independent IOR, so no dispersion; the
+glass lobe ignores roughness).
+
+Formulas (Trowbridge–Reitz/GGX, height-correlated Smith, Heitz 2018 VNDF sampling):
+
+    D(h)   = α² / (π (cos²θ_h (α² - 1) + 1)²)
+    Λ(ω)   = (sqrt(1 + α² tan²θ) - 1) / 2,   G1 = 1/(1+Λ(ωo)),  G2 = 1/(1+Λ(ωo)+Λ(ωi))
+    f_m    = F D G2 / (4 cosθo cosθi),        p(ωi) = G1(ωo) D(h) / (4 cosθo)
+    Lambert: f = ρ/π,  p = cosθi/π
+    Dielectric: exact Fresnel F(cosθ, η); reflect with probability F, else refract and
+    scale radiance by 1/η² (pbrt-v4's TransportMode::Radiance).
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from .sampling import INV_PI, onb, to_world
+
+DELTA_ALPHA = 1e-3
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ggx_d(cos_h, a2):
+    """Trowbridge–Reitz normal distribution D(h)."""
+    c2 = cos_h * cos_h
+    t = c2 * (a2 - 1.0) + 1.0
+    return a2 / (math.pi * t * t)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ggx_lambda(cos_t, a2):
+    """Smith Λ(ω) for GGX."""
+    c2 = cos_t * cos_t
+    if c2 <= 0.0:
+        return 1e30
+    tan2 = max(0.0, 1.0 - c2) / c2
+    return 0.5 * (math.sqrt(1.0 + a2 * tan2) - 1.0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ggx_eval(cos_o, cos_i, cos_h, a2):
+    """The conductor lobe without Fresnel and its pdf: (D G2 / (4 cos_o cos_i), pdf)."""
+    if cos_o <= 0.0 or cos_i <= 0.0 or cos_h <= 0.0:
+        return 0.0, 0.0
+    d = ggx_d(cos_h, a2)
+    lo = ggx_lambda(cos_o, a2)
+    li = ggx_lambda(cos_i, a2)
+    f = d / (4.0 * cos_o * cos_i * (1.0 + lo + li))
+    pdf = d / (4.0 * cos_o * (1.0 + lo))
+    return f, pdf
+
+
+@njit(cache=True, nogil=True, inline="always")
+def ggx_sample_h(wo, n, alpha, u1, u2):
+    """A microfacet normal h (world) drawn from the visible normals of wo (Heitz 2018)."""
+    t, b = onb(n[0], n[1], n[2])
+    ox = wo[0] * t[0] + wo[1] * t[1] + wo[2] * t[2]
+    oy = wo[0] * b[0] + wo[1] * b[1] + wo[2] * b[2]
+    oz = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+    vx, vy, vz = alpha * ox, alpha * oy, oz
+    inv = 1.0 / math.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx * inv, vy * inv, vz * inv
+    lensq = vx * vx + vy * vy
+    if lensq > 0.0:
+        il = 1.0 / math.sqrt(lensq)
+        t1x, t1y, t1z = -vy * il, vx * il, 0.0
+    else:
+        t1x, t1y, t1z = 1.0, 0.0, 0.0
+    t2x = vy * t1z - vz * t1y
+    t2y = vz * t1x - vx * t1z
+    t2z = vx * t1y - vy * t1x
+    r = math.sqrt(u1)
+    phi = 2.0 * math.pi * u2
+    p1 = r * math.cos(phi)
+    p2 = r * math.sin(phi)
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    hx = p1 * t1x + p2 * t2x + p3 * vx
+    hy = p1 * t1y + p2 * t2y + p3 * vy
+    hz = p1 * t1z + p2 * t2z + p3 * vz
+    hx, hy, hz = alpha * hx, alpha * hy, max(1e-7, hz)
+    inv = 1.0 / math.sqrt(hx * hx + hy * hy + hz * hz)
+    return to_world(hx * inv, hy * inv, hz * inv, t, b, n[0], n[1], n[2])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def schlick_weight(cos_d):
+    """(1 - cos)⁵ of Schlick's Fresnel: F = F0 + (1 - F0)·weight."""
+    m = min(1.0, max(0.0, 1.0 - cos_d))
+    m2 = m * m
+    return m2 * m2 * m
+
+
+@njit(cache=True, nogil=True, inline="always")
+def fresnel_dielectric(cos_i, eta):
+    """Unpolarised Fresnel reflectance and cos θ_t for relative IOR eta = n_t / n_i."""
+    sin2_t = max(0.0, 1.0 - cos_i * cos_i) / (eta * eta)
+    if sin2_t >= 1.0:
+        return 1.0, 0.0
+    cos_t = math.sqrt(1.0 - sin2_t)
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    return 0.5 * (rs * rs + rp * rp), cos_t
+
+
+@njit(cache=True, nogil=True, inline="always")
+def principled_eval(wo, wi, n, wd, wm, a2, sel_d, sel_m):
+    """Non-delta part of the material: (k_d, k_m, s, pdf) for the lane formula above.
+
+    ``sel_d``/``sel_m`` are the lobe-selection probabilities used when sampling, so the
+    returned pdf is the one-sample-MIS mixture pdf of the directions the sampler makes.
+    """
+    cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+    cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    if cos_i <= 0.0 or cos_o <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    kd = wd * INV_PI
+    pdf = sel_d * cos_i * INV_PI
+    km = 0.0
+    s = 0.0
+    if wm > 0.0 and a2 > DELTA_ALPHA * DELTA_ALPHA:
+        hx, hy, hz = wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]
+        inv = 1.0 / math.sqrt(hx * hx + hy * hy + hz * hz)
+        hx, hy, hz = hx * inv, hy * inv, hz * inv
+        cos_h = hx * n[0] + hy * n[1] + hz * n[2]
+        f, p = ggx_eval(cos_o, cos_i, cos_h, a2)
+        km = wm * f
+        s = schlick_weight(wi[0] * hx + wi[1] * hy + wi[2] * hz)
+        pdf += sel_m * p
+    return kd, km, s, pdf

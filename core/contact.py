@@ -1,0 +1,55 @@
+"""Contact sheets: a grid of an animation's PNG frames in one image (``make demo``)."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from .errors import UserError
+
+
+def read_png(path: Path) -> np.ndarray:
+    """8-bit RGB(A) pixels of a PNG as uint8 (h, w, c), row 0 at the top."""
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error:
+        raise UserError(f"cannot read image: {buf.geterror()}", file=path)
+    return buf.get_pixels(oiio.UINT8)
+
+
+def tile(images: list[np.ndarray], columns: int, gap: int = 2) -> np.ndarray:
+    """Images of one size laid out row-major on a black canvas with ``gap`` pixels between."""
+    h, w, c = images[0].shape
+    rows = -(-len(images) // columns)
+    cols = min(columns, len(images))
+    sheet = np.zeros((rows * (h + gap) - gap, cols * (w + gap) - gap, c), np.uint8)
+    for k, img in enumerate(images):
+        r, q = divmod(k, columns)
+        y, x = r * (h + gap), q * (w + gap)
+        sheet[y:y + h, x:x + w] = img[:h, :w, :c]
+    return sheet
+
+
+def write_contact_sheet(frames: list[Path], out: Path, columns: int = 8) -> Path:
+    """Tile ``frames`` (PNG) into ``out`` (PNG), written atomically."""
+    images = [read_png(p)[..., :3] for p in frames]
+    shapes = {im.shape for im in images}
+    if len(shapes) != 1:
+        raise UserError(f"frames differ in size: {sorted(shapes)}", file=frames[0].parent)
+    sheet = tile(images, columns)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.tmp-", suffix=".png", dir=out.parent)
+    os.close(fd)
+    try:
+        spec = oiio.ImageSpec(sheet.shape[1], sheet.shape[0], sheet.shape[2], oiio.UINT8)
+        o = oiio.ImageOutput.create(tmp)
+        if o is None or not o.open(tmp, spec) or not o.write_image(sheet) or not o.close():
+            raise UserError(f"cannot write {out}: {oiio.geterror()}", file=out)
+        os.replace(tmp, out)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return out

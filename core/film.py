@@ -1,0 +1,384 @@
+"""The film: per-pixel accumulation of sensor samples (the camera's sensor).
+
+The integrator hands the film batches of samples; the film keeps float64 running sums
+per pixel and turns them into an image on :meth:`Film.resolve`.
+
+Pixels
+    A pixel is addressed by its flat index ``p = row * width + col``, row 0 = the TOP of
+    the picture (the output contract of job-format.md), so a resolved ``(h, w)`` array
+    is written to disk without a flip.
+
+What is summed (per pixel, float64)
+    ====================  =========================================================
+    ``sum_sensor[p, c]``  Σ s_c, the three sensor channels (XYZ, or RGB in the
+                          ``rgb`` mode), each already divided by p(λ) and by the 4
+                          hero lanes by the integrator
+    ``sum_y2[p]``         Σ Y², Y = s_1 (the sensor's luminance channel; G in ``rgb``)
+    ``sum_alpha[p]``      Σ α, α = 1 where the primary ray hit geometry, 0 where it
+                          escaped
+    ``sum_aov[p, k]``     Σ a_k, one column per AOV, in the order of ``aov_names``
+    ``count[p]``          n, the samples taken
+    ``sum_band[p, b]``    Σ over the sample's hero lanes j with λ_j in band b of
+                          w_j = L(λ_j) / (4 p(λ_j))
+    ====================  =========================================================
+
+    The sums are built by one fused numba loop that adds each sample straight into the
+    running sums, in input order. (This is what ``np.bincount`` followed by ``+=`` would
+    do for one batch, but without the per-batch partial sum: a stream of samples gives
+    bit-identical sums however it is split into batches, as long as each pixel's samples
+    arrive in the same order.) :meth:`Film.merge` adds two partial sums, which
+    re-associates the additions: equal to rounding, not bit for bit.
+
+Estimators (on :meth:`Film.resolve`)
+    * pixel value: the mean ``m_c = Σ s_c / n``; ``rgb = M · m`` with ``M`` the
+      sensor-to-linear-Rec.709 matrix; alpha and AOVs are plain means too.
+    * spectral band b, centre λ_b, width Δ: the mean camera-frame spectral radiance
+      over [λ_b - Δ/2, λ_b + Δ/2],
+
+          S_b = (1 / (n Δ)) Σ_samples Σ_{j: λ_j ∈ band b} L(λ_j) / (4 p(λ_j)),
+
+      an unbiased estimate of (1/Δ) ∫_band L dλ. A lane belongs to band
+      ``b = floor((λ - (start - Δ/2)) · (1/Δ))``; lanes outside every band are ignored
+      (their samples still count in n: they are part of the same estimator).
+    * relative standard error of the luminance mean (for adaptive sampling):
+
+          var(Y) = (Σ Y² / n - (Σ Y / n)²) · n / (n - 1)     (unbiased, clamped at 0)
+          rel_error = sqrt(var(Y) / n) / max(|Σ Y / n|, luminance_floor)
+
+      ``luminance_floor`` (default :data:`LUMINANCE_FLOOR`) keeps near-black pixels
+      from demanding endless samples; a pixel whose samples are all 0 has error 0. A
+      pixel with fewer than 2 samples has no variance estimate and reports
+      :data:`REL_ERROR_UNKNOWN` (finite, huge). The one-pass variance loses precision
+      only when the noise is below ~1e-8 of the mean, far under any useful threshold.
+
+Finite outputs
+    A sample with any non-finite value (sensor, alpha, an AOV, a hero wavelength or lane
+    weight) is dropped whole in :meth:`Film.add_samples` and counted in
+    :attr:`Film.nonfinite_samples`, so one Inf cannot poison a pixel. A pixel without
+    samples resolves to 0 (alpha 0). Any value still non-finite after resolving (a
+    float32 overflow) is set to 0 and counted in :attr:`FilmImage.nonfinite_values`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+LUMINANCE_FLOOR = 1e-4
+"""Smallest |mean Y| used as the denominator of the relative error."""
+
+REL_ERROR_UNKNOWN = 1e30
+"""Relative error reported for pixels with fewer than 2 samples (no variance estimate)."""
+
+
+@dataclass
+class FilmImage:
+    """A resolved film: everything the image writers need. Row 0 = top of the picture."""
+
+    rgba: np.ndarray
+    """float32 (h, w, 4): linear Rec.709, scene-referred; alpha = hit coverage."""
+    aovs: dict[str, np.ndarray]
+    """float32 (h, w) each: per-pixel means ("depth", "doppler", "lab_time", ...)."""
+    spectral: np.ndarray | None
+    """float32 (h, w, nb): mean camera-frame spectral radiance per band, or None."""
+    band_centers_nm: np.ndarray | None
+    """float64 (nb,): band centres in nm, or None."""
+    spp: np.ndarray
+    """int32 (h, w): samples accumulated per pixel (dropped non-finite samples excluded)."""
+    rel_error: np.ndarray
+    """float32 (h, w): relative standard error of the luminance mean."""
+    nonfinite_values: int = 0
+    """Output values that were non-finite after resolving and were set to 0."""
+
+
+def band_centers(bands: tuple[float, float, float]) -> np.ndarray:
+    """Band centres λ = start, start + step, ..., stop (inclusive), float64 nm."""
+    start, stop, step = (float(v) for v in bands)
+    if not (step > 0.0 and math.isfinite(start) and math.isfinite(stop) and stop >= start):
+        raise ValueError(f"bad spectral bands (start, stop, step) = {bands}")
+    n = int(math.floor((stop - start) / step + 1e-9)) + 1
+    return start + step * np.arange(n, dtype=np.float64)
+
+
+@njit(cache=True, nogil=True)
+def _accumulate(
+    pixel,
+    sensor,
+    alpha,
+    aov,
+    lam,
+    lam_w,
+    band_lo,
+    inv_step,
+    sum_sensor,
+    sum_y2,
+    sum_alpha,
+    sum_aov,
+    count,
+    sum_band,
+):  # pragma: no cover - compiled
+    """Add samples i = 0..N-1 in order; skip (and count) samples with a non-finite value.
+
+    aov is (K, N); lam, lam_w are (N, lanes) (ignored when sum_band has 0 columns);
+    sum_band is (n_pix, nb). Returns the number of dropped samples.
+    """
+    n = pixel.shape[0]
+    n_aov = aov.shape[0]
+    nb = sum_band.shape[1]
+    use_bands = nb > 0
+    lanes = lam.shape[1]
+    dropped = 0
+    for i in range(n):
+        s0 = np.float64(sensor[i, 0])
+        s1 = np.float64(sensor[i, 1])
+        s2 = np.float64(sensor[i, 2])
+        a = np.float64(alpha[i])
+        # x - x is 0 for finite x and NaN for ±Inf/NaN: one well-predicted branch.
+        check = (s0 - s0) + (s1 - s1) + (s2 - s2) + (a - a)
+        for k in range(n_aov):
+            v = np.float64(aov[k, i])
+            check += v - v
+        if use_bands:
+            for j in range(lanes):
+                v = np.float64(lam[i, j])
+                u = np.float64(lam_w[i, j])
+                check += (v - v) + (u - u)
+        if check != 0.0:
+            dropped += 1
+            continue
+        p = pixel[i]
+        sum_sensor[p, 0] += s0
+        sum_sensor[p, 1] += s1
+        sum_sensor[p, 2] += s2
+        sum_y2[p] += s1 * s1
+        sum_alpha[p] += a
+        for k in range(n_aov):
+            sum_aov[p, k] += np.float64(aov[k, i])
+        count[p] += 1
+        if use_bands:
+            for j in range(lanes):
+                x = (np.float64(lam[i, j]) - band_lo) * inv_step
+                if x >= 0.0 and x < nb:
+                    sum_band[p, int(x)] += np.float64(lam_w[i, j])
+    return dropped
+
+
+class Film:
+    """Per-pixel float64 sums of sensor samples, alpha, AOVs and spectral bands.
+
+    ``Film(width, height, aovs=("depth", "doppler"), bands=(380, 780, 10))``.
+    Feed it with :meth:`add_samples`, combine partial films with :meth:`merge`, read it
+    with :meth:`resolve` (or :meth:`relative_error` for adaptive sampling). See the
+    module docstring for the estimators.
+    """
+
+    def __init__(
+        self,
+        width: int,
+        height: int,
+        aovs: Sequence[str] = (),
+        bands: tuple[float, float, float] | None = None,
+        luminance_floor: float = LUMINANCE_FLOOR,
+    ):
+        if int(width) <= 0 or int(height) <= 0:
+            raise ValueError(f"film size must be positive, got {width}x{height}")
+        self.width = int(width)
+        self.height = int(height)
+        self.aov_names: tuple[str, ...] = tuple(aovs)
+        if len(set(self.aov_names)) != len(self.aov_names):
+            raise ValueError(f"duplicate AOV names: {self.aov_names}")
+        self.bands = None if bands is None else tuple(float(v) for v in bands)
+        self.band_centers_nm = None if bands is None else band_centers(bands)
+        self.luminance_floor = float(luminance_floor)
+        n = self.width * self.height
+        nb = 0 if self.band_centers_nm is None else len(self.band_centers_nm)
+        self.sum_sensor = np.zeros((n, 3), np.float64)
+        self.sum_y2 = np.zeros(n, np.float64)
+        self.sum_alpha = np.zeros(n, np.float64)
+        self.sum_aov = np.zeros((n, len(self.aov_names)), np.float64)
+        self.count = np.zeros(n, np.int64)
+        self.sum_band = np.zeros((n, nb), np.float64)
+        self.nonfinite_samples = 0
+        """Samples dropped by :meth:`add_samples` because a value was non-finite."""
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def num_pixels(self) -> int:
+        return self.width * self.height
+
+    @property
+    def num_bands(self) -> int:
+        return self.sum_band.shape[1]
+
+    @property
+    def total_samples(self) -> int:
+        """Samples accumulated (after dropping non-finite ones)."""
+        return int(self.count.sum())
+
+    @property
+    def samples_per_pixel(self) -> np.ndarray:
+        """int32 (h, w): samples accumulated per pixel, row 0 = top."""
+        return self.count.reshape(self.height, self.width).astype(np.int32)
+
+    # ------------------------------------------------------------------ accumulation
+    def add_samples(
+        self,
+        pixel: np.ndarray,
+        sensor: np.ndarray,
+        alpha: np.ndarray,
+        aov: dict[str, np.ndarray] | None = None,
+        lam_cam: np.ndarray | None = None,
+        lam_weight: np.ndarray | None = None,
+    ) -> None:
+        """Add N samples, in order.
+
+        pixel (N,) int: flat index row*width + col (row 0 = top); sensor (N, 3): sensor
+        values already divided by the wavelength pdf and the 4 lanes; alpha (N,);
+        aov: name -> (N,) for every AOV of the film (extra names are ignored);
+        lam_cam, lam_weight (N, lanes): camera-frame hero wavelengths (nm) and
+        L(λ)/(4 p(λ)) per lane, required when the film has bands (ignored otherwise).
+        float32 or float64 inputs; sums are float64.
+        """
+        pixel = np.ascontiguousarray(pixel, dtype=np.int64)
+        sensor = np.asarray(sensor)
+        alpha = np.asarray(alpha)
+        n_in = pixel.shape[0]
+        if pixel.ndim != 1 or sensor.shape != (n_in, 3) or alpha.shape != (n_in,):
+            raise ValueError(
+                f"add_samples: shapes pixel {pixel.shape}, sensor {sensor.shape}, "
+                f"alpha {alpha.shape} do not match (N,), (N, 3), (N,)"
+            )
+        if n_in == 0:
+            return
+        if int(pixel.min()) < 0 or int(pixel.max()) >= self.num_pixels:
+            raise ValueError(
+                f"add_samples: pixel index outside [0, {self.num_pixels - 1}]: "
+                f"[{int(pixel.min())}, {int(pixel.max())}]"
+            )
+        aov_stack = self._stack_aovs(aov, n_in, sensor.dtype)
+        if self.num_bands:
+            if lam_cam is None or lam_weight is None:
+                raise ValueError("add_samples: the film has bands; lam_cam/lam_weight needed")
+            lam = np.asarray(lam_cam)
+            lam_w = np.asarray(lam_weight)
+            if lam.ndim != 2 or lam.shape[0] != n_in or lam_w.shape != lam.shape:
+                raise ValueError(
+                    f"add_samples: lam_cam {lam.shape} / lam_weight {lam_w.shape} "
+                    f"must be (N, lanes)"
+                )
+            start, _, step = self.bands
+            band_lo = start - 0.5 * step
+        else:
+            lam = lam_w = np.zeros((0, 4), np.float32)
+            band_lo, step = 0.0, 1.0
+        self.nonfinite_samples += int(
+            _accumulate(
+                pixel,
+                sensor,
+                alpha,
+                aov_stack,
+                lam,
+                lam_w,
+                float(band_lo),
+                1.0 / float(step),
+                self.sum_sensor,
+                self.sum_y2,
+                self.sum_alpha,
+                self.sum_aov,
+                self.count,
+                self.sum_band,
+            )
+        )
+
+    def _stack_aovs(
+        self, aov: dict[str, np.ndarray] | None, n_in: int, dtype: np.dtype
+    ) -> np.ndarray:
+        """The film's AOVs as one (K, N) array, in ``aov_names`` order."""
+        dt = np.float32 if dtype == np.float32 else np.float64
+        out = np.empty((len(self.aov_names), n_in), dt)
+        for k, name in enumerate(self.aov_names):
+            if aov is None or name not in aov:
+                raise ValueError(f"add_samples: AOV '{name}' missing")
+            a = np.asarray(aov[name])
+            if a.shape != (n_in,):
+                raise ValueError(f"add_samples: AOV '{name}' has shape {a.shape}, want ({n_in},)")
+            out[k] = a
+        return out
+
+    def merge(self, other: Film) -> None:
+        """Add another film's sums to this one (same size, AOVs and bands)."""
+        mine = (self.width, self.height, self.aov_names, self.bands)
+        theirs = (other.width, other.height, other.aov_names, other.bands)
+        if mine != theirs:
+            raise ValueError(f"merge: films differ (size, AOVs, bands): {mine} vs {theirs}")
+        self.sum_sensor += other.sum_sensor
+        self.sum_y2 += other.sum_y2
+        self.sum_alpha += other.sum_alpha
+        self.sum_aov += other.sum_aov
+        self.count += other.count
+        self.sum_band += other.sum_band
+        self.nonfinite_samples += other.nonfinite_samples
+
+    # ------------------------------------------------------------------ resolving
+    def _mean(self, s: np.ndarray) -> np.ndarray:
+        """s / n per pixel (first axis), 0 where n = 0, float64."""
+        n = self.count.reshape((-1,) + (1,) * (s.ndim - 1))
+        return np.divide(s, n, out=np.zeros(s.shape, np.float64), where=n > 0)
+
+    def relative_error(self) -> np.ndarray:
+        """float32 (h, w): relative standard error of each pixel's luminance mean."""
+        n = self.count.astype(np.float64)
+        mean_y = self._mean(self.sum_sensor[:, 1])
+        mean_y2 = self._mean(self.sum_y2)
+        enough = self.count >= 2
+        bessel = np.divide(n, n - 1.0, out=np.zeros_like(n), where=enough)
+        var = bessel * np.maximum(mean_y2 - mean_y * mean_y, 0.0)
+        se = np.sqrt(np.divide(var, n, out=np.zeros_like(n), where=enough))
+        rel = se / np.maximum(np.abs(mean_y), self.luminance_floor)
+        rel[~enough | ~np.isfinite(rel)] = REL_ERROR_UNKNOWN
+        return rel.reshape(self.height, self.width).astype(np.float32)
+
+    def resolve(self, sensor_to_rgb: np.ndarray) -> FilmImage:
+        """Per-pixel means: rgba = (M · mean sensor, mean alpha), AOV and band means."""
+        m = np.asarray(sensor_to_rgb, dtype=np.float64)
+        if m.shape != (3, 3):
+            raise ValueError(f"resolve: sensor_to_rgb must be (3, 3), got {m.shape}")
+        h, w = self.height, self.width
+        bad = 0
+
+        def finite32(a: np.ndarray) -> np.ndarray:
+            nonlocal bad
+            with np.errstate(over="ignore", invalid="ignore"):
+                out = a.astype(np.float32)
+            nf = ~np.isfinite(out)
+            if nf.any():
+                bad += int(np.count_nonzero(nf))
+                out[nf] = 0.0
+            return out
+
+        with np.errstate(over="ignore", invalid="ignore"):
+            rgb = self._mean(self.sum_sensor) @ m.T  # (n, 3)
+        rgba = np.empty((h, w, 4), np.float32)
+        rgba[..., :3] = finite32(rgb.reshape(h, w, 3))
+        rgba[..., 3] = finite32(self._mean(self.sum_alpha).reshape(h, w))
+        mean_aov = self._mean(self.sum_aov)
+        aovs = {
+            name: finite32(mean_aov[:, k].reshape(h, w)) for k, name in enumerate(self.aov_names)
+        }
+        spectral = None
+        if self.num_bands:
+            step = self.bands[2]
+            spectral = finite32((self._mean(self.sum_band) / step).reshape(h, w, self.num_bands))
+        return FilmImage(
+            rgba=rgba,
+            aovs=aovs,
+            spectral=spectral,
+            band_centers_nm=None if self.band_centers_nm is None else self.band_centers_nm.copy(),
+            spp=self.samples_per_pixel,
+            rel_error=self.relative_error(),
+            nonfinite_values=bad,
+        )

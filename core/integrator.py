@@ -1,0 +1,416 @@
+"""The wavefront spectral path tracer (lab frame, static scene).
+
+A wavefront is a batch of 64k–256k camera paths.  Each bounce makes one Embree
+intersect call and one occlusion call for the whole batch; the per-ray work between
+them runs in fused numba kernels (``nogil``), so threads working on different image
+tiles overlap both Embree and shading.  Live paths are compacted every bounce.
+
+Estimator.  A path carries four hero wavelengths λ_j in the *camera* frame with pdfs
+p(λ_j) (:class:`spectrum.WavelengthSampler`).  The scene is static in the lab, so every
+lookup along the path uses the lab wavelength λ_lab = D·λ_j (D from the primary
+direction; ``doppler = false`` sets λ_lab = λ_j) — as a table coordinate this is a
+constant shift ln(D)·INV_DLOG.  The film receives, per sensor channel c,
+
+    s_c = w_D Σ_j  c̄(λ_j) L_lab,j / (4 p(λ_j)),       w_D = D⁵ if searchlight else 1
+
+which is physics.md's L_cam(λ) = D⁵ L_lab(Dλ).  L_lab is estimated with next-event
+estimation (every light in :mod:`lights`) and BSDF sampling, combined with the power
+heuristic, and Russian roulette from ``RR_DEPTH`` on (on the throughput *without* the
+D⁵ and 1/p(λ) film weights, so roulette does not depend on the camera's speed).
+
+``max_depth`` counts path segments: the camera ray is segment 1, a light sample from
+the k-th hit is segment k+1.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from . import spectrum
+from .accel import MISS_DISTANCE, Accel
+from .bsdf import DELTA_ALPHA, fresnel_dielectric, ggx_sample_h, principled_eval, schlick_weight
+from .lights import SKY, SPOT, SUN, TRIANGLE, LightTable, select, spot_mask
+from .materials import SpectralTables
+from .sampling import (
+    cosine_hemisphere,
+    onb,
+    power_heuristic,
+    rand,
+    to_world,
+    uniform_sphere,
+    uniform_triangle,
+)
+
+RR_DEPTH = 3
+DIMS_CAMERA = 3      # jitter x, jitter y, wavelength offset
+DIMS_PER_BOUNCE = 8  # light pick, light u1, u2, lobe pick, bsdf u1, u2, roulette, spare
+
+
+class KernelScene(NamedTuple):
+    """Flat arrays the kernels read (all geometry in the accelerator's local coordinates)."""
+
+    v0: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    ng: np.ndarray
+    area: np.ndarray
+    vn: np.ndarray
+    has_vn: bool
+    tri_mat: np.ndarray
+    refl: np.ndarray
+    emit: np.ndarray
+    mat_w: np.ndarray
+    mat_alpha: np.ndarray
+    mat_ior: np.ndarray
+    mat_emit_row: np.ndarray
+    mat_one_sided: np.ndarray
+    l_kind: np.ndarray
+    l_prim: np.ndarray
+    l_pos: np.ndarray
+    l_dir: np.ndarray
+    l_row: np.ndarray
+    l_scale: np.ndarray
+    l_spot: np.ndarray
+    l_cdf: np.ndarray
+    tri_pmf: np.ndarray
+    sky_pmf: float
+    sky_row: int
+    eps: float
+
+
+def kernel_scene(accel: Accel, triangles: np.ndarray, normals: np.ndarray | None,
+                 material_ids: np.ndarray, tables: SpectralTables, lights: LightTable,
+                 geometry: dict[str, np.ndarray]) -> KernelScene:
+    """Pack the scene for the kernels."""
+    vn = (np.zeros((1, 3, 3), np.float32) if normals is None
+          else np.ascontiguousarray(normals, np.float32))
+    return KernelScene(
+        geometry["v0"], geometry["e1"], geometry["e2"], geometry["ng"], geometry["area"],
+        vn, normals is not None, np.ascontiguousarray(material_ids, np.int32),
+        np.ascontiguousarray(tables.refl), np.ascontiguousarray(tables.emit),
+        tables.mat_weights, tables.mat_alpha, tables.mat_ior, tables.mat_emit_row,
+        tables.mat_one_sided, lights.kind, lights.prim, lights.pos, lights.dir, lights.row,
+        lights.scale, lights.spot, lights.cdf, lights.tri_pmf, float(lights.sky_pmf),
+        int(lights.sky_row), max(1e-5 * accel.extent, 1e-9))
+
+
+def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
+    """v0, edges, unit geometric normal and area of each triangle (local coordinates)."""
+    t = np.asarray(triangles, np.float64) - origin
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    c = np.cross(e1, e2)
+    norm = np.linalg.norm(c, axis=1)
+    ng = c / np.maximum(norm, 1e-300)[:, None]
+    f = np.float32
+    return {"v0": t[:, 0].astype(f), "e1": e1.astype(f), "e2": e2.astype(f),
+            "ng": ng.astype(f), "area": (0.5 * norm).astype(f)}
+
+
+@njit(cache=True, nogil=True, inline="always")
+def lookup(table, row, u):
+    """Linear interpolation of table[row] at fractional column u (clamped)."""
+    g = table.shape[1]
+    if u <= 0.0:
+        return table[row, 0]
+    if u >= g - 1:
+        return table[row, g - 1]
+    i = int(u)
+    f = u - i
+    return table[row, i] * (1.0 - f) + table[row, i + 1] * f
+
+
+@njit(cache=True, nogil=True)
+def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, lamu,
+          prev_pdf, prev_delta, nlanes, new_o, new_d, alive, sh_o, sh_d, sh_t, sh_c, has_sh):
+    """One bounce for every live path ``i`` (path index ``idx[i]``).
+
+    Adds emission seen by the ray (MIS-weighted against NEE), prepares one shadow ray
+    (NEE) and samples the continuation; writes ``alive[i]`` and the next ray.
+    """
+    n = len(idx)
+    base = 3 + depth * 8
+    for i in range(n):
+        pi = idx[i]
+        key = keys[pi]
+        alive[i] = 0
+        has_sh[i] = 0
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        tri = prim[i]
+        if tri < 0:
+            if sc.sky_row >= 0:
+                w = 1.0
+                if depth > 0 and prev_delta[pi] == 0 and sc.sky_pmf > 0.0:
+                    w = power_heuristic(prev_pdf[pi], sc.sky_pmf / (4.0 * math.pi))
+                for j in range(nlanes):
+                    L[pi, j] += thr[pi, j] * w * lookup(sc.emit, sc.sky_row, lamu[pi, j])
+            continue
+        m = sc.tri_mat[tri]
+        b1 = bu[i]
+        b2 = bv[i]
+        px = sc.v0[tri, 0] + b1 * sc.e1[tri, 0] + b2 * sc.e2[tri, 0]
+        py = sc.v0[tri, 1] + b1 * sc.e1[tri, 1] + b2 * sc.e2[tri, 1]
+        pz = sc.v0[tri, 2] + b1 * sc.e1[tri, 2] + b2 * sc.e2[tri, 2]
+        gx, gy, gz = sc.ng[tri, 0], sc.ng[tri, 1], sc.ng[tri, 2]
+        cos_g = -(gx * dx + gy * dy + gz * dz)
+        front = cos_g > 0.0
+        if not front:
+            gx, gy, gz = -gx, -gy, -gz
+        if sc.has_vn:
+            b0 = 1.0 - b1 - b2
+            nx = b0 * sc.vn[tri, 0, 0] + b1 * sc.vn[tri, 1, 0] + b2 * sc.vn[tri, 2, 0]
+            ny = b0 * sc.vn[tri, 0, 1] + b1 * sc.vn[tri, 1, 1] + b2 * sc.vn[tri, 2, 1]
+            nz = b0 * sc.vn[tri, 0, 2] + b1 * sc.vn[tri, 1, 2] + b2 * sc.vn[tri, 2, 2]
+            inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz + 1e-30)
+            nx, ny, nz = nx * inv, ny * inv, nz * inv
+            if nx * gx + ny * gy + nz * gz < 0.0:
+                nx, ny, nz = -nx, -ny, -nz
+            if -(nx * dx + ny * dy + nz * dz) <= 1e-6:
+                nx, ny, nz = gx, gy, gz
+        else:
+            nx, ny, nz = gx, gy, gz
+        # emission seen by this ray
+        er = sc.mat_emit_row[m]
+        if er >= 0 and (front or sc.mat_one_sided[m] == 0):
+            w = 1.0
+            if depth > 0 and prev_delta[pi] == 0:
+                tt = t_hit[i]
+                p_l = sc.tri_pmf[tri] * tt * tt / (sc.area[tri] * abs(cos_g))
+                w = power_heuristic(prev_pdf[pi], p_l)
+            for j in range(nlanes):
+                L[pi, j] += thr[pi, j] * w * lookup(sc.emit, er, lamu[pi, j])
+        if depth + 1 >= max_depth:
+            continue
+        wd = sc.mat_w[m, 0]
+        wm = sc.mat_w[m, 1]
+        wg = sc.mat_w[m, 2]
+        a = sc.mat_alpha[m]
+        a2 = a * a
+        metal_delta = wm > 0.0 and a < DELTA_ALPHA
+        smooth_w = wd + (0.0 if metal_delta else wm)
+        sel_d = wd
+        sel_m = wm
+        wo = (-dx, -dy, -dz)
+        nrm = (nx, ny, nz)
+        eps = sc.eps + 2e-7 * max(abs(px), max(abs(py), abs(pz)))
+        # next-event estimation
+        nl = len(sc.l_kind)
+        if smooth_w > 0.0 and nl > 0:
+            k, p_sel = select(sc.l_cdf, rand(key, base))
+            u1 = rand(key, base + 1)
+            u2 = rand(key, base + 2)
+            kind = sc.l_kind[k]
+            delta = True
+            scale = sc.l_scale[k]
+            ok = True
+            if kind == TRIANGLE:
+                lt = sc.l_prim[k]
+                s1, s2 = uniform_triangle(u1, u2)
+                qx = sc.v0[lt, 0] + s1 * sc.e1[lt, 0] + s2 * sc.e2[lt, 0] - px
+                qy = sc.v0[lt, 1] + s1 * sc.e1[lt, 1] + s2 * sc.e2[lt, 1] - py
+                qz = sc.v0[lt, 2] + s1 * sc.e1[lt, 2] + s2 * sc.e2[lt, 2] - pz
+                dist = math.sqrt(qx * qx + qy * qy + qz * qz)
+                wix, wiy, wiz = qx / dist, qy / dist, qz / dist
+                cos_l = -(sc.ng[lt, 0] * wix + sc.ng[lt, 1] * wiy + sc.ng[lt, 2] * wiz)
+                if sc.mat_one_sided[sc.tri_mat[lt]] == 1 and cos_l <= 0.0:
+                    ok = False
+                cos_l = abs(cos_l)
+                p_l = p_sel * dist * dist / (sc.area[lt] * cos_l + 1e-30)
+                delta = False
+                tmax = dist * (1.0 - 1e-4) - eps
+            elif kind == SKY:
+                wix, wiy, wiz = uniform_sphere(u1, u2)
+                p_l = p_sel / (4.0 * math.pi)
+                delta = False
+                tmax = 1e30
+            elif kind == SUN:
+                wix, wiy, wiz = -sc.l_dir[k, 0], -sc.l_dir[k, 1], -sc.l_dir[k, 2]
+                p_l = p_sel
+                tmax = 1e30
+            else:
+                qx, qy, qz = sc.l_pos[k, 0] - px, sc.l_pos[k, 1] - py, sc.l_pos[k, 2] - pz
+                dist = math.sqrt(qx * qx + qy * qy + qz * qz) + 1e-30
+                wix, wiy, wiz = qx / dist, qy / dist, qz / dist
+                scale = scale / (dist * dist)
+                if kind == SPOT:
+                    cos_a = -(sc.l_dir[k, 0] * wix + sc.l_dir[k, 1] * wiy + sc.l_dir[k, 2] * wiz)
+                    scale *= spot_mask(cos_a, sc.l_spot[k, 0], sc.l_spot[k, 1])
+                p_l = p_sel
+                tmax = dist * (1.0 - 1e-4) - eps
+            wi = (wix, wiy, wiz)
+            if ok and p_l > 0.0 and scale > 0.0 and (wix * gx + wiy * gy + wiz * gz) > 0.0:
+                kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, sel_d, sel_m)
+                cos_i = wix * nx + wiy * ny + wiz * nz
+                if pdf_b > 0.0 and cos_i > 0.0:
+                    w = 1.0 if delta else power_heuristic(p_l, pdf_b)
+                    c = w * cos_i * scale / p_l
+                    row = sc.l_row[k]
+                    for j in range(nlanes):
+                        rho = lookup(sc.refl, m, lamu[pi, j])
+                        f = kd * rho + km * (rho + (1.0 - rho) * s)
+                        sh_c[i, j] = thr[pi, j] * f * c * lookup(sc.emit, row, lamu[pi, j])
+                    sh_o[i, 0] = px + gx * eps
+                    sh_o[i, 1] = py + gy * eps
+                    sh_o[i, 2] = pz + gz * eps
+                    sh_d[i, 0], sh_d[i, 1], sh_d[i, 2] = wix, wiy, wiz
+                    sh_t[i] = tmax
+                    has_sh[i] = 1
+        # continue the path: pick a lobe
+        ul = rand(key, base + 3)
+        u1 = rand(key, base + 4)
+        u2 = rand(key, base + 5)
+        off = 1.0
+        if ul < wg:
+            # smooth dielectric: entering when the ray meets the geometric front face
+            eta = sc.mat_ior[m] if front else 1.0 / sc.mat_ior[m]
+            cos_o = wo[0] * nx + wo[1] * ny + wo[2] * nz
+            fr, cos_t = fresnel_dielectric(cos_o, eta)
+            if u1 < fr:
+                wix = 2.0 * cos_o * nx - wo[0]
+                wiy = 2.0 * cos_o * ny - wo[1]
+                wiz = 2.0 * cos_o * nz - wo[2]
+            else:
+                wix = -wo[0] / eta + (cos_o / eta - cos_t) * nx
+                wiy = -wo[1] / eta + (cos_o / eta - cos_t) * ny
+                wiz = -wo[2] / eta + (cos_o / eta - cos_t) * nz
+                inv_e2 = 1.0 / (eta * eta)
+                for j in range(nlanes):
+                    thr[pi, j] *= inv_e2
+                off = -1.0
+            prev_delta[pi] = 1
+        elif metal_delta and ul < wg + wm:
+            cos_o = wo[0] * nx + wo[1] * ny + wo[2] * nz
+            wix = 2.0 * cos_o * nx - wo[0]
+            wiy = 2.0 * cos_o * ny - wo[1]
+            wiz = 2.0 * cos_o * nz - wo[2]
+            s = schlick_weight(cos_o)
+            for j in range(nlanes):
+                rho = lookup(sc.refl, m, lamu[pi, j])
+                thr[pi, j] *= rho + (1.0 - rho) * s
+            prev_delta[pi] = 1
+        else:
+            if ul >= wg + wm:
+                t, b = onb(nx, ny, nz)
+                lx, ly, lz = cosine_hemisphere(u1, u2)
+                wix, wiy, wiz = to_world(lx, ly, lz, t, b, nx, ny, nz)
+            else:
+                hx, hy, hz = ggx_sample_h(wo, nrm, a, u1, u2)
+                c = wo[0] * hx + wo[1] * hy + wo[2] * hz
+                wix = 2.0 * c * hx - wo[0]
+                wiy = 2.0 * c * hy - wo[1]
+                wiz = 2.0 * c * hz - wo[2]
+            wi = (wix, wiy, wiz)
+            if wix * gx + wiy * gy + wiz * gz <= 0.0:
+                continue
+            kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, sel_d, sel_m)
+            if pdf_b <= 0.0:
+                continue
+            cos_i = wix * nx + wiy * ny + wiz * nz
+            # lobe picks: [0, w_g) glass, [w_g, w_g + w_m) metal, the rest diffuse; so the
+            # density of wi is w_d p_d + w_m p_m = pdf_b (one-sample MIS over the lobes)
+            c = cos_i / pdf_b
+            for j in range(nlanes):
+                rho = lookup(sc.refl, m, lamu[pi, j])
+                thr[pi, j] *= (kd * rho + km * (rho + (1.0 - rho) * s)) * c
+            prev_pdf[pi] = pdf_b
+            prev_delta[pi] = 0
+        # Russian roulette
+        if depth + 1 >= RR_DEPTH:
+            q = 0.0
+            for j in range(nlanes):
+                q = max(q, thr[pi, j])
+            if q < 1.0:
+                if rand(key, base + 6) >= q:
+                    continue
+                for j in range(nlanes):
+                    thr[pi, j] /= q
+        new_o[i, 0] = px + gx * eps * off
+        new_o[i, 1] = py + gy * eps * off
+        new_o[i, 2] = pz + gz * eps * off
+        new_d[i, 0], new_d[i, 1], new_d[i, 2] = wix, wiy, wiz
+        alive[i] = 1
+
+
+@njit(cache=True, nogil=True)
+def add_shadows(idx, has_sh, blocked, sh_c, L, nlanes):
+    """Add the unoccluded next-event contributions to their paths."""
+    k = 0
+    for i in range(len(idx)):
+        if has_sh[i]:
+            if not blocked[k]:
+                for j in range(nlanes):
+                    L[idx[i], j] += sh_c[i, j]
+            k += 1
+
+
+@njit(cache=True, nogil=True)
+def sensor_values(L, lam, pdf, w_d, response, rgb_mode, out, lam_weight):
+    """Per-path sensor values s_c = w_D Σ_j c̄(λ_j) L_j / (4 p_j) (see module docstring)."""
+    n = L.shape[0]
+    nbins = response.shape[1]
+    for i in range(n):
+        out[i, 0] = 0.0
+        out[i, 1] = 0.0
+        out[i, 2] = 0.0
+        if rgb_mode:
+            for c in range(3):
+                out[i, c] = L[i, c] * w_d[i]
+            continue
+        for j in range(4):
+            w = w_d[i] * L[i, j] / (4.0 * pdf[i, j])
+            lam_weight[i, j] = w
+            x = lam[i, j] - spectrum_min_nm
+            k = int(x)
+            if k < 0 or k >= nbins - 1:
+                continue
+            f = x - k
+            for c in range(3):
+                out[i, c] += w * (response[c, k] * (1.0 - f) + response[c, k + 1] * f)
+
+
+spectrum_min_nm = spectrum.SENSOR_MIN_NM
+
+
+def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_local: np.ndarray,
+          d: np.ndarray, lamu: np.ndarray, nlanes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Trace a wavefront of camera rays; returns (L (N,4) lab radiance, primary hit t).
+
+    ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit.
+    """
+    n = len(keys)
+    L = np.zeros((n, 4), np.float32)
+    thr = np.ones((n, 4), np.float32)
+    prev_pdf = np.zeros(n, np.float32)
+    prev_delta = np.ones(n, np.int32)
+    idx = np.arange(n, dtype=np.int64)
+    first_t = None
+    for depth in range(max_depth):
+        hits = accel.intersect(o_local, d)
+        if depth == 0:
+            first_t = hits.t
+        m = len(idx)
+        new_o = np.empty((m, 3), np.float32)
+        new_d = np.empty((m, 3), np.float32)
+        alive = np.empty(m, np.int8)
+        sh_o = np.empty((m, 3), np.float32)
+        sh_d = np.empty((m, 3), np.float32)
+        sh_t = np.empty(m, np.float32)
+        sh_c = np.empty((m, 4), np.float32)
+        has_sh = np.empty(m, np.int8)
+        shade(sc, depth, max_depth, idx, keys, o_local, d, hits.t, hits.prim, hits.u, hits.v,
+              thr, L, lamu, prev_pdf, prev_delta, nlanes, new_o, new_d, alive, sh_o, sh_d,
+              sh_t, sh_c, has_sh)
+        s = has_sh.view(bool)
+        if s.any():
+            blocked = accel.occluded(sh_o[s], sh_d[s], sh_t[s])
+            add_shadows(idx, has_sh, blocked, sh_c, L, nlanes)
+        keep = alive.view(bool)
+        if not keep.any():
+            break
+        idx, o_local, d = idx[keep], new_o[keep], new_d[keep]
+    if first_t is None:
+        first_t = np.full(n, MISS_DISTANCE, np.float32)
+    return L, first_t

@@ -1,0 +1,301 @@
+"""Frames: from a job to films and files.
+
+``prepare`` turns a :class:`scene.Scene` into what the kernels need (Embree BVH, spectral
+tables, light table) once per job; every frame of an animation reuses it.
+:class:`FrameRenderer` renders one frame: image tiles are the units of work (so the
+result does not depend on the thread count), each tile traces its samples in
+wavefronts of about ``WAVEFRONT`` paths, and worker threads overlap Embree and the
+numba kernels, which all release the GIL.
+
+Primary rays start at the shutter event, in float64; before they are handed to Embree
+in float32 they are advanced to the scene's bounding sphere, so a camera far from the
+scene keeps its precision (the skipped distance is added back to the depth AOV).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import relativity, spectrum
+from .accel import MISS_DISTANCE, Accel
+from .camera import PinholeCamera, lab_rays
+from .film import Film
+from .integrator import KernelScene, kernel_scene, sensor_values, trace, triangle_geometry
+from .job import Job, RenderSettings, beta_at_frame, frame_list
+from .lights import LightTable, build_lights
+from .materials import SpectralTables, build_tables
+from .sampling import path_keys, rand_dims
+from .scene import Scene
+
+WAVEFRONT = 1 << 16
+ESCAPED_DEPTH = 1e10
+
+
+@dataclass
+class PreparedScene:
+    """A scene ready for the kernels; static, so shared by every frame."""
+
+    scene: Scene
+    accel: Accel
+    tables: SpectralTables
+    lights: LightTable
+    kernel: KernelScene
+    radius: float
+    mode: str
+
+
+def prepare(scene: Scene, mode: str) -> PreparedScene:
+    """Build the BVH, the spectral tables and the light table of ``scene``."""
+    accel = Accel(scene.triangles)
+    geom = triangle_geometry(scene.triangles, accel.origin)
+    corners = np.asarray(scene.triangles, np.float64).reshape(-1, 3) - accel.origin
+    radius = float(np.sqrt((corners**2).sum(1).max())) * 1.001 + 1e-9
+    tables = build_tables(list(scene.materials), mode)
+    lights = build_lights(scene, tables, accel.origin, geom["area"].astype(np.float64), radius)
+    kscene = kernel_scene(accel, scene.triangles, scene.normals, scene.material_ids, tables,
+                          lights, geom)
+    return PreparedScene(scene, accel, tables, lights, kscene, radius, mode)
+
+
+def frame_events(job: Job) -> list[tuple[int, relativity.ShutterEvent]]:
+    """The shutter event of every frame of the job (physics.md, "Camera worldline")."""
+    mo = job.motion
+    frames = frame_list(job)
+    position = np.asarray(camera_settings(job).position, np.float64)
+    if mo.mode == "worldline":
+        events = relativity.worldline_events(
+            position, mo.frames, mo.ct, mo.ct_per_frame,
+            keyframes=mo.keyframes, beta_const=mo.beta,
+            proper_acceleration=mo.proper_acceleration)
+        by_frame = dict(zip(range(mo.frames[0], mo.frames[1] + 1), events, strict=True))
+        return [(f, by_frame[f]) for f in frames]
+    out = []
+    for f in frames:
+        ct = mo.ct + (f - mo.frames[0]) * mo.ct_per_frame
+        out.append((f, relativity.snapshot_event(position, beta_at_frame(job, f), ct)))
+    return out
+
+
+def camera_settings(job: Job):
+    """The job's camera, else the glTF's first camera."""
+    return job.camera
+
+
+def tiles(width: int, height: int, threads: int) -> list[tuple[int, int, int, int]]:
+    """Square image tiles (x0, y0, x1, y1), small enough to give every thread work."""
+    size = 64
+    while size > 16 and math.ceil(width / size) * math.ceil(height / size) < 4 * threads:
+        size //= 2
+    return [(x, y, min(x + size, width), min(y + size, height))
+            for y in range(0, height, size) for x in range(0, width, size)]
+
+
+@dataclass
+class FrameStats:
+    paths: int = 0
+    seconds: float = 0.0
+    d_min: float = math.inf
+    d_max: float = 0.0
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+
+class RenderCancelled(Exception):  # noqa: N818 - a signal, not an error
+    """The caller's cancel check asked the render to stop."""
+
+
+class FrameRenderer:
+    """Renders frames of one prepared scene with fixed render settings."""
+
+    def __init__(self, prep: PreparedScene, settings: RenderSettings, camera: PinholeCamera,
+                 aovs: tuple[str, ...] = (), bands: tuple[float, float, float] | None = None):
+        self.prep = prep
+        self.settings = settings
+        self.camera = camera
+        self.aovs = tuple(aovs)
+        self.bands = bands if prep.mode != "rgb" else None
+        mode = prep.mode
+        self.rgb_mode = mode == "rgb"
+        self.sampler = spectrum.make_sampler(
+            "seed-gaussian" if mode == "seed-gaussian" else "cie1931", bands=self.bands)
+        self.response = (np.zeros((3, 2), np.float32) if self.rgb_mode
+                         else spectrum.sensor_response(mode).astype(np.float32))
+        self.to_rgb = spectrum.sensor_to_rgb(mode)
+        self.doppler = settings.doppler and not self.rgb_mode
+        self.searchlight = settings.searchlight and mode == "cie1931"
+        self.threads = settings.threads or os.cpu_count() or 1
+
+    def render(self, event: relativity.ShutterEvent, frame: int,
+               progress: Callable[[int], None] | None = None,
+               cancel: Callable[[], bool] | None = None) -> tuple[Film, FrameStats]:
+        """Render one frame seen from ``event``; returns the film and statistics."""
+        s = self.settings
+        film = Film(s.width, s.height, aovs=self.aovs, bands=self.bands)
+        stats = FrameStats()
+        lock = threading.Lock()
+        t0 = time.perf_counter()
+
+        def work(tile):
+            x0, y0, x1, y1 = tile
+            cols, rows = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1))
+            pixels = (rows * s.width + cols).ravel().astype(np.int64)
+            chunk = max(1, WAVEFRONT // len(pixels))
+            for s0 in range(0, s.spp, chunk):
+                if cancel is not None and cancel():
+                    raise RenderCancelled
+                s1 = min(s.spp, s0 + chunk)
+                self._trace_chunk(event, frame, pixels, s0, s1, film, lock, stats)
+                if progress is not None:
+                    progress(len(pixels) * (s1 - s0))
+
+        with ThreadPoolExecutor(self.threads) as pool:
+            for f in [pool.submit(work, t) for t in tiles(s.width, s.height, self.threads)]:
+                f.result()
+        stats.seconds = time.perf_counter() - t0
+        return film, stats
+
+    def _trace_chunk(self, event, frame, pixels, s0, s1, film, lock, stats):
+        s = self.settings
+        prep = self.prep
+        n_s = s1 - s0
+        pix = np.repeat(pixels, n_s)
+        samp = np.tile(np.arange(s0, s1, dtype=np.int64), len(pixels))
+        keys = path_keys(s.seed, frame, pix, samp)
+        col = (pix % s.width) + rand_dims(keys, 0)
+        row = (pix // s.width) + rand_dims(keys, 1)
+        d_cam = self.camera.directions_cam(col, row)
+        d_lab, D = lab_rays(d_cam, event.beta)
+        n = len(pix)
+        if self.rgb_mode:
+            lam = np.zeros((n, 4))
+            pdf = np.ones((n, 4))
+            lamu = np.tile(np.array([0.0, 1.0, 2.0, 0.0], np.float32), (n, 1))
+            nlanes = 3
+        else:
+            u = (samp + rand_dims(keys, 2)) / s.spp
+            lam, pdf = self.sampler.hero(u)
+            lam_lab = lam * D[:, None] if self.doppler else lam
+            lamu = ((np.log(lam_lab) - spectrum.LOG_GRID_MIN) * spectrum.INV_DLOG).astype(
+                np.float32)
+            nlanes = 4
+        w_d = D**5 if self.searchlight else np.ones(n)
+        o_local, skipped = self._enter_scene(event.x, d_lab)
+        L, t_hit = trace(prep.kernel, prep.accel, s.max_depth, keys, o_local,
+                         d_lab.astype(np.float32), lamu, nlanes)
+        hit = t_hit < MISS_DISTANCE
+        dist = np.where(hit, t_hit + skipped, ESCAPED_DEPTH)
+        sensor = np.empty((n, 3), np.float64)
+        lam_weight = np.zeros((n, 4), np.float64)
+        sensor_values(L, lam, pdf, w_d, self.response, self.rgb_mode, sensor, lam_weight)
+        aov = {"depth": dist, "doppler": D, "lab_time": event.t - dist}
+        aov = {k: aov[k] for k in self.aovs}
+        with lock:
+            film.add_samples(pix, sensor, hit.astype(np.float64), aov,
+                             lam if self.bands else None, lam_weight if self.bands else None)
+            stats.paths += n
+            stats.d_min = min(stats.d_min, float(D.min()))
+            stats.d_max = max(stats.d_max, float(D.max()))
+
+    def _enter_scene(self, x_lab: np.ndarray, d_lab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Origins in accelerator coordinates, advanced (float64) to the bounding sphere."""
+        o = np.asarray(x_lab, np.float64) - self.prep.accel.origin
+        b = d_lab @ o
+        c = float(o @ o) - self.prep.radius**2
+        disc = b * b - c
+        t_in = np.where((c > 0) & (disc > 0), -b - np.sqrt(np.maximum(disc, 0.0)), 0.0)
+        t_in = np.maximum(t_in, 0.0)
+        o_adv = o[None, :] + t_in[:, None] * d_lab
+        return o_adv.astype(np.float32), t_in
+
+
+def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent) -> dict[str, str]:
+    """What a finished frame records (and what resume compares)."""
+    from .imageio import metadata_for
+
+    return metadata_for(frame, event.beta, float(event.tau), job.render.spp,
+                        extra={"relray:spectral": job.render.spectral,
+                               "relray:t_lab": repr(float(event.t)),
+                               "relray:seed": str(job.render.seed)})
+
+
+def frame_is_done(job: Job, frame: int, event: relativity.ShutterEvent) -> bool:
+    """A frame is done when every requested file exists and its EXR says it is complete."""
+    from .imageio import frame_complete
+
+    out = job.output
+    stem = out.name.format(frame=frame)
+    wanted = {"exr": f"{stem}.exr", "png": f"{stem}.png", "spectral-exr": f"{stem}.spectral.exr"}
+    if not all((out.dir / wanted[f]).exists() for f in out.formats):
+        return False
+    if "exr" in out.formats:
+        meta = frame_metadata(job, frame, event)
+        keys = ("relray:spp", "relray:beta", "relray:ct", "relray:spectral", "relray:seed")
+        return frame_complete(out.dir / wanted["exr"], {k: meta[k] for k in keys})
+    return True
+
+
+def resolve_camera(job: Job, scene: Scene):
+    """The job's [camera], else the glTF's first camera, else a clear error."""
+    from .errors import UserError
+
+    cam = job.camera or scene.camera
+    if cam is None:
+        raise UserError("no camera: add a [camera] table or a camera to the glTF file",
+                        key="camera", file=job.path)
+    return cam
+
+
+def render_job(job: Job, overwrite: bool = False, show_progress: bool = True) -> list:
+    """Render every frame of ``job`` that is not already done; return the written paths."""
+    import logging
+
+    from tqdm import tqdm
+
+    from .imageio import remove_stale_temps, write_frame
+    from .scene import build_scene
+
+    log = logging.getLogger("relray")
+    scene = build_scene(job)
+    cam = resolve_camera(job, scene)
+    events = frame_events(job)
+    todo = [(f, ev) for f, ev in events if overwrite or not frame_is_done(job, f, ev)]
+    if job.output.dir.exists():
+        remove_stale_temps(job.output.dir)
+    if show_progress:
+        print(f"relray: {len(events) - len(todo)} done, {len(todo)} to render "
+              f"-> {job.output.dir}", flush=True)
+    if not todo:
+        return []
+    prep = prepare(scene, job.render.spectral)
+    s = job.render
+    renderer = FrameRenderer(prep, s, PinholeCamera.from_settings(cam, s.width, s.height),
+                             aovs=job.output.aovs,
+                             bands=job.output.spectral_bands
+                             if "spectral-exr" in job.output.formats else None)
+    total = len(todo) * s.width * s.height * s.spp
+    bar = tqdm(total=total, unit="path", unit_scale=True, disable=not show_progress,
+               desc="render", dynamic_ncols=True)
+    written = []
+    try:
+        for frame, ev in todo:
+            film, stats = renderer.render(ev, frame, progress=bar.update)
+            if film.nonfinite_samples:
+                log.warning("frame %d: %d non-finite samples dropped", frame,
+                            film.nonfinite_samples)
+            image = film.resolve(renderer.to_rgb)
+            meta = frame_metadata(job, frame, ev)
+            meta["relray:seconds"] = f"{stats.seconds:.3f}"
+            meta["relray:doppler_range"] = f"{stats.d_min:.6g},{stats.d_max:.6g}"
+            written += write_frame(job.output.dir, job.output.name.format(frame=frame),
+                                   job.output.formats, image, meta, job.output.exposure)
+            bar.set_postfix_str(f"frame {frame} D {stats.d_min:.3g}..{stats.d_max:.3g}")
+    finally:
+        bar.close()
+    return written
