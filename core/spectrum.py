@@ -166,7 +166,7 @@ def _sensor_response(mode: str) -> np.ndarray:
         mu = np.asarray(SEED_MU_NM)[:, None]
         sd = np.asarray(SEED_SIGMA_NM)[:, None]
         g = np.exp(-0.5 * ((lam[None, :] - mu) / sd) ** 2)
-        g /= g @ _trapezoid_1nm()  # unit area under the film's 1 nm trapezoid rule
+        g /= (g @ _trapezoid_1nm())[:, None]  # unit area under the film's 1 nm trapezoid rule
         return g.astype(np.float32)
     raise ValueError(f"spectral mode {mode!r} has no sensor response (expected cie1931 or "
                      "seed-gaussian)")
