@@ -1,0 +1,267 @@
+"""Film accumulation: exact means, bands, determinism, merge, non-finite samples, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from relray.core.film import REL_ERROR_UNKNOWN, Film, band_centers
+
+AOVS = ("depth", "doppler", "lab_time")
+
+
+def _stream(n: int, n_pix: int, seed: int = 0, bands: bool = True) -> dict:
+    """A random sample stream (float32 like the integrator's)."""
+    rng = np.random.default_rng(seed)
+    s = {
+        "pixel": rng.integers(0, n_pix, n),
+        "sensor": rng.normal(1.0, 0.5, (n, 3)).astype(np.float32),
+        "alpha": (rng.random(n) < 0.7).astype(np.float32),
+        "aov": {k: rng.random(n).astype(np.float32) * 10 for k in AOVS},
+    }
+    if bands:
+        s["lam_cam"] = (360.0 + 470.0 * rng.random((n, 4))).astype(np.float32)
+        s["lam_weight"] = rng.random((n, 4)).astype(np.float32)
+    return s
+
+
+def _slice(s: dict, a: int, b: int) -> dict:
+    out = {k: v[a:b] for k, v in s.items() if k != "aov"}
+    out["aov"] = {k: v[a:b] for k, v in s["aov"].items()}
+    return out
+
+
+def _sums(f: Film) -> list[np.ndarray]:
+    return [f.sum_sensor, f.sum_y2, f.sum_alpha, f.sum_aov, f.count, f.sum_band]
+
+
+def test_band_centers_inclusive():
+    c = band_centers((380, 780, 10))
+    assert len(c) == 41 and c[0] == 380.0 and c[-1] == 780.0
+    with pytest.raises(ValueError):
+        band_centers((500, 400, 10))
+
+
+def test_exact_means_and_layout():
+    # 3 x 2 film; dyadic values so every mean is exact.
+    f = Film(3, 2, aovs=("depth", "doppler"), bands=(400.0, 500.0, 10.0))
+    pixel = np.array([0, 0, 5, 5, 5])  # (row 0, col 0) twice; (row 1, col 2) three times
+    sensor = np.array(
+        [[1.0, 2.0, 3.0], [3.0, 4.0, 5.0], [0.5, 0.25, 0.125], [1.5, 0.75, 0.375], [1, 2, 3]]
+    )
+    alpha = np.array([1.0, 0.0, 1.0, 1.0, 1.0])
+    aov = {"depth": np.array([2.0, 4.0, 1.0, 2.0, 3.0]), "doppler": np.full(5, 1.5)}
+    # Band of a lane: floor((λ - 395) / 10). Lanes at 400 (band 0), 404.5 (band 0),
+    # 455 (band 6), 390 / 900 (outside: ignored).
+    lam = np.array(
+        [[400, 404.5, 455, 390], [400, 900, 900, 900], [455, 455, 455, 455], [900] * 4, [900] * 4]
+    )
+    w = np.array([[1.0, 2.0, 4.0, 8.0], [16.0, 1, 1, 1], [1.0, 1.0, 1.0, 1.0], [1.0] * 4, [1] * 4])
+    f.add_samples(pixel, sensor, alpha, aov, lam, w)
+    img = f.resolve(np.eye(3))
+
+    assert img.rgba.shape == (2, 3, 4) and img.rgba.dtype == np.float32
+    np.testing.assert_array_equal(img.rgba[0, 0], [2.0, 3.0, 4.0, 0.5])
+    np.testing.assert_array_equal(
+        img.rgba[1, 2, :3], np.mean(sensor[2:], axis=0).astype(np.float32)
+    )
+    assert img.rgba[1, 2, 3] == 1.0
+    assert img.aovs["depth"][0, 0] == 3.0 and img.aovs["depth"][1, 2] == 2.0
+    assert img.aovs["doppler"][1, 2] == 1.5
+    np.testing.assert_array_equal(img.spp, [[2, 0, 0], [0, 0, 3]])
+
+    assert img.spectral.shape == (2, 3, 11)
+    np.testing.assert_array_equal(img.band_centers_nm, np.arange(400.0, 501.0, 10.0))
+    # pixel 0: band 0 gets (1 + 2 + 16) / (2 samples * 10 nm); band 6 gets 4 / 20.
+    expect0 = np.zeros(11)
+    expect0[0] = 19.0 / 20.0
+    expect0[6] = 4.0 / 20.0
+    np.testing.assert_allclose(img.spectral[0, 0], expect0, rtol=1e-7)
+    expect5 = np.zeros(11)
+    expect5[6] = 4.0 / 30.0
+    np.testing.assert_allclose(img.spectral[1, 2], expect5, rtol=1e-7)
+    assert img.nonfinite_values == 0 and f.nonfinite_samples == 0
+
+
+def test_resolve_uses_matrix():
+    s = _stream(4000, 12, seed=3, bands=False)
+    f = Film(4, 3)
+    f.add_samples(s["pixel"], s["sensor"], s["alpha"])
+    m = np.random.default_rng(1).normal(size=(3, 3))
+    img = f.resolve(m)
+    mean = np.zeros((12, 3))
+    for p in range(12):
+        mean[p] = s["sensor"][s["pixel"] == p].astype(np.float64).mean(axis=0)
+    np.testing.assert_allclose(img.rgba[..., :3].reshape(12, 3), mean @ m.T, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError):
+        f.resolve(np.eye(4))
+
+
+def test_float32_and_float64_inputs_agree():
+    s = _stream(3000, 20, seed=4)
+    f32 = Film(5, 4, aovs=AOVS, bands=(380, 780, 10))
+    f64 = Film(5, 4, aovs=AOVS, bands=(380, 780, 10))
+    f32.add_samples(**s)
+    s64 = {k: (v.astype(np.float64) if k not in ("aov", "pixel") else v) for k, v in s.items()}
+    s64["aov"] = {k: v.astype(np.float64) for k, v in s["aov"].items()}
+    f64.add_samples(**s64)
+    for a, b in zip(_sums(f32), _sums(f64), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=25, deadline=None)
+@given(cuts=st.lists(st.integers(0, 2000), max_size=6))
+def test_batch_split_is_bit_identical(cuts):
+    s = _stream(2000, 30, seed=5)
+    whole = Film(6, 5, aovs=AOVS, bands=(380, 780, 10))
+    whole.add_samples(**s)
+    split = Film(6, 5, aovs=AOVS, bands=(380, 780, 10))
+    edges = [0, *sorted(cuts), 2000]
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        split.add_samples(**_slice(s, a, b))
+    for x, y in zip(_sums(whole), _sums(split), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_merge_equals_one_film():
+    s = _stream(5000, 30, seed=6)
+    whole = Film(6, 5, aovs=AOVS, bands=(380, 780, 10))
+    whole.add_samples(**s)
+    parts = [Film(6, 5, aovs=AOVS, bands=(380, 780, 10)) for _ in range(3)]
+    for part, (a, b) in zip(parts, [(0, 1000), (1000, 3500), (3500, 5000)], strict=True):
+        part.add_samples(**_slice(s, a, b))
+    merged = parts[0]
+    merged.merge(parts[1])
+    merged.merge(parts[2])
+    np.testing.assert_array_equal(merged.count, whole.count)
+    for x, y in zip(_sums(whole), _sums(merged), strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError):
+        merged.merge(Film(6, 5, aovs=AOVS))
+
+
+def test_merge_exact_for_dyadic_values():
+    rng = np.random.default_rng(7)
+    n = 400
+    pix = rng.integers(0, 4, n)
+    sensor = rng.integers(-8, 8, (n, 3)) / 4.0
+    a, b = Film(2, 2), Film(2, 2)
+    a.add_samples(pix[:150], sensor[:150], np.ones(150))
+    b.add_samples(pix[150:], sensor[150:], np.ones(n - 150))
+    a.merge(b)
+    whole = Film(2, 2)
+    whole.add_samples(pix, sensor, np.ones(n))
+    for x, y in zip(_sums(whole), _sums(a), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_nonfinite_samples_dropped_and_counted():
+    s = _stream(500, 6, seed=8)
+    bad = {
+        k: (v.copy() if k != "aov" else {n: a.copy() for n, a in v.items()}) for k, v in s.items()
+    }
+    bad["sensor"][3, 0] = np.inf
+    bad["alpha"][10] = np.nan
+    bad["aov"]["depth"][20] = -np.inf
+    bad["lam_weight"][30, 2] = np.nan
+    bad["lam_cam"][40, 1] = np.inf
+    f = Film(3, 2, aovs=AOVS, bands=(380, 780, 10))
+    f.add_samples(**bad)
+    assert f.nonfinite_samples == 5
+    keep = np.ones(500, bool)
+    keep[[3, 10, 20, 30, 40]] = False
+    ref = Film(3, 2, aovs=AOVS, bands=(380, 780, 10))
+    ref.add_samples(
+        s["pixel"][keep],
+        s["sensor"][keep],
+        s["alpha"][keep],
+        {k: v[keep] for k, v in s["aov"].items()},
+        s["lam_cam"][keep],
+        s["lam_weight"][keep],
+    )
+    for x, y in zip(_sums(f), _sums(ref), strict=True):
+        np.testing.assert_array_equal(x, y)
+    img = f.resolve(np.eye(3))
+    for arr in (img.rgba, img.spectral, img.rel_error, *img.aovs.values()):
+        assert np.isfinite(arr).all()
+
+
+def test_all_nonfinite_batch_and_overflow_resolve_finite():
+    f = Film(2, 1, aovs=("depth",))
+    f.add_samples(np.array([0, 1]), np.full((2, 3), np.nan), np.ones(2), {"depth": np.ones(2)})
+    assert f.nonfinite_samples == 2 and f.total_samples == 0
+    # Finite float64 samples whose mean overflows float32: set to 0 and counted.
+    f.add_samples(np.array([1]), np.array([[1e300, 1.0, 1.0]]), np.ones(1), {"depth": [1e300]})
+    img = f.resolve(np.eye(3))
+    assert np.isfinite(img.rgba).all() and np.isfinite(img.aovs["depth"]).all()
+    assert img.rgba[0, 1, 0] == 0.0 and img.nonfinite_values == 2
+
+
+def test_empty_pixels_resolve_to_zero():
+    f = Film(4, 4, aovs=AOVS, bands=(380, 780, 20))
+    f.add_samples(
+        np.array([5]),
+        np.ones((1, 3)),
+        np.ones(1),
+        {k: np.ones(1) for k in AOVS},
+        np.full((1, 4), 550.0),
+        np.ones((1, 4)),
+    )
+    with np.errstate(all="raise"):
+        img = f.resolve(np.eye(3))
+    empty = img.spp == 0
+    assert empty.sum() == 15
+    assert (img.rgba[empty] == 0).all()
+    assert (img.spectral[empty] == 0).all()
+    for a in img.aovs.values():
+        assert (a[empty] == 0).all()
+    assert (img.rel_error[empty] == np.float32(REL_ERROR_UNKNOWN)).all()
+    assert img.rel_error[1, 1] == np.float32(REL_ERROR_UNKNOWN)  # one sample: unknown
+    assert np.isfinite(img.rel_error).all()
+
+
+def test_relative_error_matches_statistics():
+    rng = np.random.default_rng(9)
+    n_pix, n, c, sigma = 64, 2000, 2.0, 0.5
+    pixel = np.repeat(np.arange(n_pix), n)
+    y = c + sigma * rng.standard_normal(n_pix * n)
+    sensor = np.stack([np.zeros_like(y), y, np.zeros_like(y)], axis=1)
+    f = Film(8, 8)
+    f.add_samples(pixel, sensor, np.ones(n_pix * n))
+    rel = f.relative_error().reshape(-1).astype(np.float64)
+    # Exactly the textbook estimator, per pixel ...
+    yy = y.reshape(n_pix, n)
+    direct = yy.std(axis=1, ddof=1) / np.sqrt(n) / yy.mean(axis=1)
+    np.testing.assert_allclose(rel, direct, rtol=1e-5)
+    # ... and close to the analytic σ/(√n c): the sample sd has relative spread
+    # 1/√(2(n-1)) ≈ 1.6% per pixel, so the mean of 64 pixels is within 0.2% (1σ).
+    analytic = sigma / np.sqrt(n) / c
+    assert abs(rel.mean() / analytic - 1.0) < 0.01
+    assert np.all(np.abs(rel / analytic - 1.0) < 6.0 / np.sqrt(2 * (n - 1)))
+
+
+def test_relative_error_of_constant_and_black_pixels_is_zero():
+    f = Film(2, 1)
+    f.add_samples(
+        np.array([0, 0, 0, 1, 1]), np.array([[0, 3.0, 0]] * 3 + [[0, 0, 0]] * 2), np.ones(5)
+    )
+    np.testing.assert_array_equal(f.relative_error(), [[0.0, 0.0]])
+
+
+def test_input_validation():
+    f = Film(2, 2, aovs=("depth",), bands=(400, 700, 10))
+    ok = dict(sensor=np.ones((1, 3)), alpha=np.ones(1), aov={"depth": np.ones(1)})
+    lam = dict(lam_cam=np.full((1, 4), 500.0), lam_weight=np.ones((1, 4)))
+    with pytest.raises(ValueError):
+        f.add_samples(np.array([4]), **ok, **lam)  # out of range
+    with pytest.raises(ValueError):
+        f.add_samples(np.array([-1]), **ok, **lam)
+    with pytest.raises(ValueError):
+        f.add_samples(np.array([0]), np.ones((1, 3)), np.ones(1), {}, **lam)  # AOV missing
+    with pytest.raises(ValueError):
+        f.add_samples(np.array([0]), **ok)  # bands need wavelengths
+    f.add_samples(np.array([0]), **ok, **lam)
+    f.add_samples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), {"depth": np.zeros(0)})
+    assert f.total_samples == 1
