@@ -20,8 +20,8 @@ Provides
 ``check_beta``                  validate a user-supplied β, raising ``UserError``
 ==============================  ==============================================================
 
-Conventions (see ``docs/physics.md``, the authority on formulas and signs)
--------------------------------------------------------------------------
+Conventions (see physics.md, the design's authority on formulas and signs)
+--------------------------------------------------------------------------
 - c = 1. Times are ``ct`` in scene units.
 - **Lab frame S**: static scene objects are at rest. **Camera frame S'**: moves with
   velocity β (a 3-vector in *lab axes*), |β| < 1, obtained from S by a *pure boost*
@@ -119,6 +119,16 @@ def _hypot3(v: np.ndarray) -> np.ndarray:
     return np.hypot(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    """v/|v| for a non-zero 3-vector, accurate even for subnormal components.
+
+    Dividing by |v| directly fails there: |(0, 5e-324, 5e-324)| rounds to 5e-324 and
+    v/|v| = (0, 1, 1). Scaling by the largest component first avoids this.
+    """
+    u = v / np.max(np.abs(v))
+    return u / _hypot3(u)
+
+
 def _inv_gamma(b: np.ndarray | float) -> np.ndarray:
     """1/γ = sqrt((1-b)(1+b)) for a speed b in [0, 1); 1-b is exact for b >= 1/2."""
     return np.sqrt((1.0 - b) * (1.0 + b))
@@ -212,9 +222,11 @@ def aberrate(d_cam: ArrayLike, beta: ArrayLike) -> np.ndarray:
     Evaluated in the algebraically equal, cancellation-free form: with cos θ' = β̂·d',
     the part of d along β̂ is proportional to cos θ' - b = (1 - b) - (1 - cos θ') and the
     part across it to d'_⊥/γ, where 1 - cos θ' = |d' - β̂|²/2 and
-    d'_⊥ = (d' - β̂) + (1 - cos θ') β̂ (both accurate for d' near β̂). The positive
-    common factor 1/(1 - β·d') drops out because the result is renormalised to unit
-    length in float64. At β = 0 this returns a float64 copy of ``d_cam``, bit for bit.
+    d'_⊥ = c - (c·β̂) β̂ with the chord c = d' - β̂ (both accurate for d' near β̂, and
+    d'_⊥ has no spurious component along β̂, which would be amplified by γ when
+    cos θ' ≈ b). The positive common factor 1/(1 - β·d') drops out because the result
+    is renormalised to unit length in float64.
+    At β = 0 this returns a float64 copy of ``d_cam``, bit for bit.
     Raises ValueError if |β| >= 1.
     """
     d = _as_vectors(d_cam, "d_cam")
@@ -222,11 +234,11 @@ def aberrate(d_cam: ArrayLike, beta: ArrayLike) -> np.ndarray:
     b = float(_checked_speed(v))
     if b == 0.0:
         return d.copy()
-    beta_hat = v / b
+    beta_hat = _unit(v)
     inv_g = _inv_gamma(b)
     chord = d - beta_hat
     one_minus_cos = 0.5 * np.sum(chord * chord, axis=-1, keepdims=True)
-    d_perp = chord + one_minus_cos * beta_hat
+    d_perp = chord - np.sum(chord * beta_hat, axis=-1, keepdims=True) * beta_hat
     out = ((1.0 - b) - one_minus_cos) * beta_hat + inv_g * d_perp
     out /= np.sqrt(np.sum(out * out, axis=-1, keepdims=True))
     return out
@@ -262,7 +274,7 @@ def doppler_factor(d_cam: ArrayLike, beta: ArrayLike) -> float | np.ndarray:
     b = float(_checked_speed(v))
     if b == 0.0:
         return _scalar_or_array(np.ones(d.shape[:-1]))
-    return _scalar_or_array(1.0 / (_one_minus_dot(d, v / b, b) / _inv_gamma(b)))
+    return _scalar_or_array(1.0 / (_one_minus_dot(d, _unit(v), b) / _inv_gamma(b)))
 
 
 def doppler_factor_lab(d_lab: ArrayLike, beta: ArrayLike) -> float | np.ndarray:
@@ -279,7 +291,7 @@ def doppler_factor_lab(d_lab: ArrayLike, beta: ArrayLike) -> float | np.ndarray:
     b = float(_checked_speed(v))
     if b == 0.0:
         return _scalar_or_array(np.ones(d.shape[:-1]))
-    return _scalar_or_array(_one_minus_dot(d, -v / b, b) / _inv_gamma(b))
+    return _scalar_or_array(_one_minus_dot(d, -_unit(v), b) / _inv_gamma(b))
 
 
 def doppler_ring_angle(b: ArrayLike) -> float | np.ndarray:
@@ -374,7 +386,7 @@ def constant_acceleration_event(
     a = float(_hypot3(acc))
     if a == 0.0:
         return snapshot_event(pos, v0, tau)
-    a_hat = acc / a
+    a_hat = _unit(acc)
     b0 = float(v0 @ a_hat)
     if float(_hypot3(v0 - b0 * a_hat)) > 1e-12:
         raise ValueError("beta0 must be parallel to the proper acceleration a_vec")
@@ -448,7 +460,7 @@ def _linear_beta_segment(
     w = float(_hypot3(diff))
     if w == 0.0:
         return dtau / c_a, (dtau / c_a) * beta_a
-    q_hat = diff / w
+    q_hat = _unit(diff)
     u_a = float(beta_a @ q_hat)
     u_b = u_a + w
     p_perp = beta_a - u_a * q_hat
