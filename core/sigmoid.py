@@ -18,9 +18,20 @@ The fit is a batched Levenberg–Marquardt solve of the square 3×3 system
 ``B · v(c) = rgb_target`` for every colour at once, where ``B`` maps the reflectance values
 on a set of nodes to linear RGB (it contains the CMFs, D65, the XYZ→RGB matrix and the
 quadrature).  Greys are solved in closed form (constant reflectance), black is exactly 0.
+Measured: 0.4–0.8 ms per colour in batches of 1e3–1e4, about 14 ms for a single colour; the
+whole sRGB cube [0, 1]³ converges (residual < 1e-12), including its corners.
+
+Also here: :class:`FitModel` (the lumped forward model) and :class:`CoefficientCache` (the
+in-memory / on-disk cache of fitted coefficients).
 """
 
 from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -96,6 +107,64 @@ def evaluate(
         v = np.broadcast_to(v, (c.shape[0], 1))
         s = np.where(mask[None, :] & np.isfinite(v), v, s)
     return s
+
+
+@dataclass(frozen=True, eq=False)
+class FitModel:
+    """Forward model of the fit: rgb = B_band · s(t_band) + b_uv · v_uv + b_ir · v_ir.
+
+    t_band (m,) normalised wavelengths of the grid nodes inside the band, B_band (3, m) their
+    RGB weights; b_uv, b_ir (3,) the summed weights of the nodes below / above the band
+    (which all hold one value: the band-edge value or the override).  ``tag`` hashes the
+    weights, band and version (the disk-cache key).
+    """
+
+    t_band: np.ndarray
+    B_band: np.ndarray
+    b_uv: np.ndarray
+    b_ir: np.ndarray
+    tag: str
+
+    @classmethod
+    def from_node_weights(
+        cls, B: np.ndarray, lam_nodes: np.ndarray, band: tuple[float, float], version: str
+    ) -> FitModel:
+        """Lump per-node RGB weights B (N, 3) on nodes at λ (N,) nm into a FitModel."""
+        used = np.flatnonzero(np.any(B != 0.0, axis=1))
+        lam = lam_nodes[used]
+        below, above = lam < band[0], lam > band[1]
+        inside = ~(below | above)
+        tag = hashlib.sha1(B.tobytes() + repr((band, version)).encode()).hexdigest()[:16]
+        return cls(
+            t_band=band_t(lam[inside], band),
+            B_band=np.ascontiguousarray(B[used[inside]].T),
+            b_uv=B[used[below]].sum(axis=0),
+            b_ir=B[used[above]].sum(axis=0),
+            tag=tag,
+        )
+
+
+def fit_colours(target: np.ndarray, uv: np.ndarray, ir: np.ndarray, model: FitModel) -> np.ndarray:
+    """Coefficients (n, 3) for linear-RGB targets (n, 3) in [0, 1] under ``model``.
+
+    Greys without overrides are exact in closed form (black -> c2 = -inf, white -> +inf);
+    the others start from the grey of their luminance and go through :func:`fit`.
+    uv, ir (n,): overrides, NaN = none.
+    """
+    target = np.asarray(target, dtype=np.float64)
+    coeffs = np.zeros((target.shape[0], 3))
+    no_override = np.isnan(uv) & np.isnan(ir)
+    grey = (target[:, 0] == target[:, 1]) & (target[:, 1] == target[:, 2]) & no_override
+    coeffs[grey] = grey_coefficients(target[grey, 0])
+    todo = np.flatnonzero(~grey)
+    if todo.size:
+        y = target[todo] @ np.array([0.2126, 0.7152, 0.0722])
+        init = grey_coefficients(np.clip(y, 1e-3, 1.0 - 1e-3))
+        coeffs[todo], _ = fit(
+            target[todo], model.t_band, model.B_band, model.b_uv, model.b_ir,
+            uv[todo], ir[todo], init,
+        )
+    return coeffs
 
 
 def _model(c, t, basis, B_band, b_uv, b_ir, uv, ir):
@@ -191,3 +260,60 @@ def fit(
     else:
         resid[active] = np.max(np.abs(r), axis=1)
     return c, resid
+
+
+class CoefficientCache:
+    """Fitted coefficients in memory, mirrored to one ``.npz`` file per model tag on disk.
+
+    Keys are tuples ``(tag, r, g, b, uv, ir)`` (uv/ir = -1 for no override), values (3,)
+    coefficients.  The file is ``$XDG_CACHE_HOME/relray/<version>-<tag>.npz`` (default
+    ``~/.cache/relray``), disabled by ``RELRAY_DISK_CACHE=0``.  Writes are atomic (temp file,
+    then rename); a missing, broken or unwritable cache only costs a refit, never an error.
+    """
+
+    def __init__(self, version: str):
+        self.version = version
+        self.memory: dict[tuple, np.ndarray] = {}
+        self._loaded: set[str] = set()
+
+    def path(self, tag: str) -> Path | None:
+        """The cache file for a model tag, or None when the disk cache is disabled."""
+        if os.environ.get("RELRAY_DISK_CACHE", "1") == "0":
+            return None
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        return Path(base) / "relray" / f"{self.version}-{tag}.npz"
+
+    def load(self, tag: str) -> None:
+        """Merge the file for ``tag`` into memory (once per path)."""
+        path = self.path(tag)
+        if path is None or str(path) in self._loaded:
+            return
+        self._loaded.add(str(path))
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                keys, coeffs = z["keys"], z["coeffs"]
+            for k, c in zip(keys, coeffs, strict=True):
+                self.memory.setdefault((tag, *map(float, k)), np.asarray(c, np.float64))
+        except Exception:  # noqa: BLE001 - a missing or broken cache is simply refitted
+            pass
+
+    def store(self, tag: str) -> None:
+        """Write every in-memory entry of ``tag`` to its file (atomically)."""
+        path = self.path(tag)
+        if path is None:
+            return
+        items = [(k[1:], v) for k, v in self.memory.items() if k[0] == tag]
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            keys = np.array([k for k, _ in items], dtype=np.float64).reshape(-1, 5)
+            coeffs = np.array([v for _, v in items], dtype=np.float64).reshape(-1, 3)
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+            try:
+                with os.fdopen(fd, "wb") as fh:
+                    np.savez(fh, keys=keys, coeffs=coeffs)
+                os.replace(tmp, path)
+            finally:
+                if os.path.exists(tmp):
+                    os.unlink(tmp)
+        except Exception:  # noqa: BLE001 - an unwritable cache only costs a refit
+            pass

@@ -34,7 +34,8 @@ sensor tables and :func:`lookup` of the table, which is what the film's Monte Ca
 converges to.  Emitters are normalised to luminance ``Y = ∫ ȳ L dλ = 1``, so the film maps
 an RGB (1, 1, 1) emitter to RGB (1, 1, 1).  The XYZ→Rec.709 matrix is built from the sRGB
 primaries and the white point of *our* D65_ext (as pbrt-v4 and Mitsuba 3 do), so a white
-reflector under D65 is exactly (1, 1, 1) instead of slightly pink.
+reflector under D65 is exactly (1, 1, 1) (the textbook matrix, white 0.3127/0.3290, would
+leave it 0.014 ΔE00 off).
 
 Outside the visible.  RGB says nothing about reflectance outside roughly 400–700 nm, yet a
 Doppler factor D maps camera wavelengths to ``D·λ``.  The sigmoid's wavelength argument is
@@ -48,13 +49,9 @@ round-trips exactly.
 
 from __future__ import annotations
 
-import hashlib
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
@@ -96,7 +93,7 @@ _FIT_VERSION = "jh2019-v1"
 
 
 def grid_nm() -> np.ndarray:
-    """Lab-wavelength grid λ_k = GRID_MIN_NM·(GRID_MAX_NM/GRID_MIN_NM)^(k/(GRID_N-1)), nm, float64."""
+    """Lab-wavelength grid λ_k = GRID_MIN_NM·(GRID_MAX_NM/GRID_MIN_NM)^(k/(GRID_N-1)), nm (f64)."""
     return _grid().copy()
 
 
@@ -214,7 +211,7 @@ def sensor_to_rgb(mode: str) -> np.ndarray:
     "cie1931": XYZ → linear Rec.709 built by colour-science's ``normalised_primary_matrix``
     from the sRGB primaries and the white point of :func:`d65_ext` (its own chromaticity
     under the 1 nm CMFs, x ≈ 0.31272, y ≈ 0.32903), so D65_ext maps to exactly (1, 1, 1).
-    It differs from the textbook matrix (white 0.3127, 0.3290) by < 1e-4.
+    Its entries differ from colour-science's sRGB matrix (white 0.3127, 0.3290) by < 1e-3.
     "seed-gaussian" and "rgb": identity.
     """
     _check_mode(mode)
@@ -457,9 +454,11 @@ def _project(f, lo_nm: float, hi_nm: float, scale_nm: float) -> np.ndarray:
 def gaussian_line(mu_nm: float, sigma_nm: float) -> np.ndarray:
     """Unit-area Gaussian line exp(-(λ-μ)²/2σ²)/(σ√(2π)) on the grid, float32 (GRID_N,).
 
-    Tabulated by hat-function projection, so ∫ lookup(table) dλ = 1 exactly (renormalised)
-    and lines narrower than the grid spacing (≈ 0.39 nm at 550 nm) keep their area and
-    centre instead of aliasing.  Requires σ > 0 and μ inside the grid.
+    When σ is at least the grid spacing at μ (≈ 0.39 nm at 550 nm) the nodes hold point
+    values (linear interpolation then widens the variance by only ≈ h²/6: σ = 1 nm reads as
+    1.012 nm); narrower lines are tabulated by hat-function projection, so they keep their
+    area and centre instead of aliasing.  Either way the table is renormalised so that
+    ∫ lookup(table, λ) dλ = 1.  Requires σ > 0 and μ inside the grid.
     """
     mu, sd = float(mu_nm), float(sigma_nm)
     if not (sd > 0.0 and math.isfinite(sd) and GRID_MIN_NM < mu < GRID_MAX_NM):
@@ -468,7 +467,10 @@ def gaussian_line(mu_nm: float, sigma_nm: float) -> np.ndarray:
     def g(lam):
         return np.exp(-0.5 * ((lam - mu) / sd) ** 2) / (sd * math.sqrt(2.0 * math.pi))
 
-    t = _project(g, mu - 12.0 * sd, mu + 12.0 * sd, sd)
+    if sd >= mu * math.expm1(1.0 / INV_DLOG):  # resolved: point values at the nodes
+        t = g(_grid())
+    else:
+        t = _project(g, mu - 12.0 * sd, mu + 12.0 * sd, sd)
     area = float(t @ _hat_weights())
     if not area > 0.0:
         raise ValueError(f"gaussian_line: line ({mu}, {sd}) has no area on the grid")
@@ -498,7 +500,7 @@ def tabulated(nm: np.ndarray, values: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------- RGB -> spectrum
 @lru_cache(maxsize=1)
-def _fit_model() -> dict:
+def _fit_model() -> _sig.FitModel:
     """The fit's forward model: the film's 1 nm estimate of linear RGB under D65_ext.
 
     rgb = Σ_i W_i lookup(s, λ_i), W = M · (cmf · lookup(D65_ext) · trapezoid); lookup is
@@ -513,67 +515,11 @@ def _fit_model() -> dict:
     B = np.zeros((GRID_N, 3))
     np.add.at(B, i, (W * (1.0 - f)).T)
     np.add.at(B, i + 1, (W * f).T)
-    nodes = np.unique(np.concatenate([i, i + 1]))
-    lam_n = _grid()[nodes]
-    lo, hi = SIGMOID_BAND_NM
-    below, above = lam_n < lo, lam_n > hi
-    band = ~(below | above)
-    tag = hashlib.sha1(
-        B.tobytes() + repr((SIGMOID_BAND_NM, _FIT_VERSION)).encode()
-    ).hexdigest()[:16]
-    return {
-        "t_band": _sig.band_t(lam_n[band], SIGMOID_BAND_NM),
-        "B_band": np.ascontiguousarray(B[nodes[band]].T),
-        "b_uv": B[nodes[below]].sum(axis=0),
-        "b_ir": B[nodes[above]].sum(axis=0),
-        "tag": tag,
-    }
+    return _sig.FitModel.from_node_weights(B, _grid(), SIGMOID_BAND_NM, _FIT_VERSION)
 
 
-_COEFF_CACHE: dict[tuple[float, ...], np.ndarray] = {}
-_DISK_LOADED: set[str] = set()
-
-
-def _cache_file(tag: str) -> Path | None:
-    if os.environ.get("RELRAY_DISK_CACHE", "1") == "0":
-        return None
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "relray" / f"{_FIT_VERSION}-{tag}.npz"
-
-
-def _disk_load(tag: str) -> None:
-    path = _cache_file(tag)
-    if path is None or str(path) in _DISK_LOADED:
-        return
-    _DISK_LOADED.add(str(path))
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            keys, coeffs = z["keys"], z["coeffs"]
-        for k, c in zip(keys, coeffs, strict=True):
-            _COEFF_CACHE.setdefault((tag, *map(float, k)), np.asarray(c, np.float64))
-    except Exception:  # noqa: BLE001 - a missing or broken cache is simply refitted
-        pass
-
-
-def _disk_store(tag: str) -> None:
-    path = _cache_file(tag)
-    if path is None:
-        return
-    items = [(k[1:], v) for k, v in _COEFF_CACHE.items() if k[0] == tag]
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        keys = np.array([k for k, _ in items], dtype=np.float64).reshape(-1, 5)
-        coeffs = np.array([v for _, v in items], dtype=np.float64).reshape(-1, 3)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, keys=keys, coeffs=coeffs)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-    except Exception:  # noqa: BLE001 - an unwritable cache only costs a refit
-        pass
+#: Fitted coefficients, in memory and in $XDG_CACHE_HOME/relray (see sigmoid_coefficients).
+_CACHE = _sig.CoefficientCache(_FIT_VERSION)
 
 
 def _per_colour(value, n: int, name: str) -> np.ndarray:
@@ -610,42 +556,22 @@ def sigmoid_coefficients(
     n = a.shape[0]
     uv_a, ir_a = _per_colour(uv, n, "uv"), _per_colour(ir, n, "ir")
     model = _fit_model()
-    tag = model["tag"]
-    _disk_load(tag)
+    tag = model.tag
+    _CACHE.load(tag)
     keys = [
         (tag, *a[j], -1.0 if np.isnan(uv_a[j]) else round(float(uv_a[j]), 9),
          -1.0 if np.isnan(ir_a[j]) else round(float(ir_a[j]), 9))
         for j in range(n)
     ]
-    missing = sorted({k for k in keys if k not in _COEFF_CACHE})
+    missing = sorted({k for k in keys if k not in _CACHE.memory})
     if missing:
         m = np.array([k[1:] for k in missing])
         m_uv = np.where(m[:, 3] < 0.0, np.nan, m[:, 3])
         m_ir = np.where(m[:, 4] < 0.0, np.nan, m[:, 4])
-        coeffs = _fit(m[:, :3], m_uv, m_ir, model)
-        for k, c in zip(missing, coeffs, strict=True):
-            _COEFF_CACHE[k] = c
-        _disk_store(tag)
-    return np.array([_COEFF_CACHE[k] for k in keys]).reshape(n, 3)
-
-
-def _fit(target: np.ndarray, uv: np.ndarray, ir: np.ndarray, model: dict) -> np.ndarray:
-    """Fit coefficients for unique targets (n, 3) in [0, 1] (see sigmoid_coefficients)."""
-    n = target.shape[0]
-    coeffs = np.zeros((n, 3))
-    no_override = np.isnan(uv) & np.isnan(ir)
-    grey = (target[:, 0] == target[:, 1]) & (target[:, 1] == target[:, 2]) & no_override
-    coeffs[grey] = _sig.grey_coefficients(target[grey, 0])
-    todo = np.flatnonzero(~grey)
-    if todo.size:
-        y = target[todo] @ np.array([0.2126, 0.7152, 0.0722])
-        init = _sig.grey_coefficients(np.clip(y, 1e-3, 1.0 - 1e-3))
-        c, _ = _sig.fit(
-            target[todo], model["t_band"], model["B_band"], model["b_uv"], model["b_ir"],
-            uv[todo], ir[todo], init,
-        )
-        coeffs[todo] = c
-    return coeffs
+        coeffs = _sig.fit_colours(m[:, :3], m_uv, m_ir, model)
+        _CACHE.memory.update(zip(missing, coeffs, strict=True))
+        _CACHE.store(tag)
+    return np.array([_CACHE.memory[k] for k in keys]).reshape(n, 3)
 
 
 def rgb_reflectance(
@@ -691,7 +617,8 @@ def seed_reflectance(rgb: np.ndarray) -> np.ndarray:
     of width σ_i/f_i), |f| the Euclidean norm of rgb, μ = (600, 550, 450) nm,
     σ = (25, 25, 15) nm.  The seed leaves K open; K = √(2π)·25·3^¼ makes each of white's
     red and green terms peak at exactly 1, and the clamp at 1 keeps it a reflectance
-    (white is then 1 over ≈ 430–635 nm; single channels would exceed 1 by 3^¼ without it).
+    (white is then 1 over 435–465 nm and 541–609 nm, with a dip to 0.1 at 490 nm, and ≈ 0
+    beyond ≈ 700 nm; single channels would exceed 1 by 3^¼ without the clamp).
     rgb is clamped to [0, 1]; a zero channel contributes nothing; black gives 0.
     """
     a = np.clip(_as_rgb(rgb, "seed_reflectance"), 0.0, 1.0)
@@ -702,7 +629,7 @@ def seed_reflectance(rgb: np.ndarray) -> np.ndarray:
     for ch in range(3):
         f = a[:, ch : ch + 1]
         sd = SEED_SIGMA_NM[ch] / np.where(f > 0.0, f, 1.0)
-        g = np.exp(-0.5 * ((lam[None, :] - SEED_MU_NM[ch]) / sd) ** 2) / (sd * math.sqrt(2 * math.pi))
-        out += np.where(f > 0.0, f * g, 0.0)
+        g = np.exp(-0.5 * ((lam[None, :] - SEED_MU_NM[ch]) / sd) ** 2) / sd
+        out += np.where(f > 0.0, f * g / math.sqrt(2.0 * math.pi), 0.0)
     out = k * out / np.where(norm > 0.0, norm, 1.0)[:, None]
     return np.minimum(out, 1.0).astype(np.float32)
