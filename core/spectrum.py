@@ -54,6 +54,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
 from . import sigmoid as _sig
 
@@ -281,10 +282,35 @@ class WavelengthSampler:
         return np.where(inside, self.pdf[np.clip(i, 0, self.pdf.shape[0] - 1)], 0.0)
 
     def hero(self, u: np.ndarray, n: int = 4) -> tuple[np.ndarray, np.ndarray]:
-        """n hero wavelengths per u: λ_j = sample((u + j/n) mod 1), -> (λ, pdf), each (N, n)."""
-        u = np.asarray(u, dtype=np.float64).reshape(-1, 1)
-        uj = np.mod(u + np.arange(n)[None, :] / n, 1.0)
-        return self.sample(uj)
+        """n hero wavelengths per u: λ_j = sample((u + j/n) mod 1), -> (λ, pdf), each (N, n).
+
+        The same inverse CDF as :meth:`sample`, fused in a numba kernel (the camera stage
+        of every wavefront calls it).
+        """
+        u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1))
+        lam = np.empty((u.shape[0], n))
+        pdf = np.empty((u.shape[0], n))
+        _hero_kernel(self.cdf, self.edges_nm, self.pdf, u, lam, pdf)
+        return lam, pdf
+
+
+@njit(cache=True, nogil=True)
+def _hero_kernel(cdf, edges, pdf, u, lam_out, pdf_out):
+    """λ_j = inverse-CDF((u + j/n) mod 1) for every u; exact pdf of the bin."""
+    k = pdf.shape[0]
+    n = lam_out.shape[1]
+    for i in range(u.shape[0]):
+        for j in range(n):
+            v = u[i] + j / n
+            v = v - math.floor(v)
+            b = np.searchsorted(cdf, v, side="right") - 1
+            b = min(max(b, 0), k - 1)
+            c0 = cdf[b]
+            t = min(max((v - c0) / (cdf[b + 1] - c0), 0.0), 1.0)
+            lo = edges[b]
+            hi = edges[b + 1]
+            lam_out[i, j] = min(lo + t * (hi - lo), np.nextafter(hi, lo))
+            pdf_out[i, j] = pdf[b]
 
 
 def make_sampler(
