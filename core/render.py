@@ -73,7 +73,7 @@ def frame_events(job: Job) -> list[tuple[int, relativity.ShutterEvent]]:
     if mo.mode == "worldline":
         events = relativity.worldline_events(
             position, mo.frames, mo.ct, mo.ct_per_frame,
-            keyframes=mo.keyframes, beta_const=mo.beta,
+            keyframes=mo.keyframes, beta_const=None if mo.keyframes else mo.beta,
             proper_acceleration=mo.proper_acceleration)
         by_frame = dict(zip(range(mo.frames[0], mo.frames[1] + 1), events, strict=True))
         return [(f, by_frame[f]) for f in frames]

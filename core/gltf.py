@@ -1,0 +1,548 @@
+"""glTF 2.0 import (.glb and .gltf): meshes, materials, punctual lights, the camera.
+
+The reader works on the raw JSON and binary chunks (the GLB container is a
+12-byte header and two chunks), so every glTF extension is directly at hand and a
+truncated or corrupt file gives one :class:`~relray.core.errors.UserError` naming
+``scene.file`` (or the mesh object's ``file`` key). Textures, skins, morph targets
+and animations are ignored; Draco and meshopt compression are refused.
+
+What is read, and into what
+---------------------------
+
+=========================================  =================================================
+glTF                                       relray
+=========================================  =================================================
+mesh primitives (TRIANGLES, STRIP, FAN)    triangles, through the node hierarchy's world
+                                           matrices (``matrix`` or T·R·S); winding flipped
+                                           under a mirroring transform
+``NORMAL``                                 shading normals (inverse-transpose transformed);
+                                           face normals where a primitive has none
+``baseColorFactor`` (linear)               ``base_color`` (alpha ignored); default 1 1 1
+``metallicFactor``, ``roughnessFactor``    ``metallic``, ``roughness``; default 1, 1
+``emissiveFactor``                         ``emission``
+``KHR_materials_emissive_strength``        ``emission_strength`` (1 when absent and
+                                           emissiveFactor is not black)
+``KHR_materials_transmission``             ``transmission``
+``KHR_materials_ior``                      ``ior`` (default 1.5)
+no material                                Blender's default: grey 0.8, roughness 0.5,
+                                           metallic 0 (as Blender's importer leaves it)
+``KHR_lights_punctual`` point              point, ``power`` = cd · 4π / 683 W
+``KHR_lights_punctual`` spot               spot, ``power`` = cd · 4π / 683 W,
+                                           ``spot_size`` = 2 · outerConeAngle,
+                                           ``spot_blend`` = 1 - inner / outer
+``KHR_lights_punctual`` directional        sun, ``power`` = lux / 683 W/m²
+first perspective camera                   :class:`CameraSettings`: ``fov`` = yfov in
+(depth-first node order)                   degrees (vertical); aspectRatio is ignored
+=========================================  =================================================
+
+The light conversion is the one of Blender's glTF importer in its default
+("Standard", physically based) lighting mode: 683 lm/W, and Blender's point and spot
+power counts the full sphere. Lights keep their node transform: the position, and
+the direction -Z of the node.
+
+**Axes.** glTF is Y-up, Blender and relray are Z-up. As Blender's importer does, every
+world-space point and direction is mapped (x, y, z) -> (x, -z, y), i.e. by the proper
+rotation ``Y_UP_TO_Z_UP`` (+90° about x). Cameras and lights look along their local
+-Z with +Y up in both conventions, so their rotation is ``Y_UP_TO_Z_UP @ R_gltf``.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import logging
+import math
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+from urllib.parse import unquote
+
+import numpy as np
+
+from .errors import UserError
+from .job import CameraSettings, LightSpec, MaterialSpec
+from .shapes import face_normals
+
+log = logging.getLogger("relray")
+
+#: World-space axis conversion, glTF (Y up) -> Blender/relray (Z up): (x, y, z) -> (x, -z, y).
+Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+#: Blender's photometric conversion (lm per W at 555 nm).
+WATTS_TO_LUMENS = 683.0
+
+_GLB_MAGIC = b"glTF"
+_CHUNK_JSON = 0x4E4F534A
+_CHUNK_BIN = 0x004E4942
+_COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4",
+                     5126: "<f4"}
+_TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_UNSUPPORTED_EXTENSIONS = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
+
+GltfResult = tuple[
+    np.ndarray, np.ndarray | None, np.ndarray, list[MaterialSpec], list[LightSpec],
+    CameraSettings | None,
+]
+
+
+class _CorruptError(Exception):
+    """A problem with the file's content (turned into a UserError at the boundary)."""
+
+
+# --------------------------------------------------------------------- container
+
+
+def _read_document(path: Path) -> tuple[dict[str, Any], bytes | None]:
+    """The JSON document and the GLB binary chunk (None for .gltf)."""
+    raw = path.read_bytes()
+    if raw[:4] == _GLB_MAGIC:
+        return _parse_glb(raw)
+    try:
+        doc = json.loads(raw.decode("utf-8-sig"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise _CorruptError(f"neither a GLB file nor glTF JSON ({e})") from None
+    return _check_document(doc), None
+
+
+def _parse_glb(raw: bytes) -> tuple[dict[str, Any], bytes | None]:
+    if len(raw) < 12:
+        raise _CorruptError("shorter than the 12-byte GLB header")
+    _, version, length = struct.unpack_from("<4sII", raw, 0)
+    if version != 2:
+        raise _CorruptError(f"GLB version {version}; only glTF 2.0 is supported")
+    if length > len(raw):
+        raise _CorruptError(f"truncated: the header says {length} bytes, the file has {len(raw)}")
+    offset, json_chunk, bin_chunk = 12, None, None
+    while offset + 8 <= length:
+        chunk_len, chunk_type = struct.unpack_from("<II", raw, offset)
+        offset += 8
+        if offset + chunk_len > length:
+            raise _CorruptError("truncated: a chunk runs past the end of the file")
+        data = raw[offset : offset + chunk_len]
+        offset += chunk_len
+        if chunk_type == _CHUNK_JSON and json_chunk is None:
+            json_chunk = data
+        elif chunk_type == _CHUNK_BIN and bin_chunk is None:
+            bin_chunk = data
+    if json_chunk is None:
+        raise _CorruptError("no JSON chunk")
+    try:
+        doc = json.loads(json_chunk.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise _CorruptError(f"the JSON chunk is not valid JSON ({e})") from None
+    return _check_document(doc), bin_chunk
+
+
+def _check_document(doc: Any) -> dict[str, Any]:
+    if not isinstance(doc, dict) or not isinstance(doc.get("asset"), dict):
+        raise _CorruptError("not a glTF document (no 'asset')")
+    version = str(doc["asset"].get("version", ""))
+    if not version.startswith("2."):
+        raise _CorruptError(f"glTF version '{version}'; only 2.0 is supported")
+    required = [e for e in doc.get("extensionsRequired", []) if e in _UNSUPPORTED_EXTENSIONS]
+    if required:
+        raise _CorruptError(f"needs {', '.join(required)}, which relray cannot read; "
+                       "export without compression")
+    return doc
+
+
+def _load_buffers(doc: dict[str, Any], base: Path, glb_bin: bytes | None) -> list[bytes]:
+    buffers = []
+    for i, buf in enumerate(doc.get("buffers", [])):
+        uri = buf.get("uri")
+        if uri is None:
+            if glb_bin is None or i != 0:
+                raise _CorruptError(f"buffers[{i}] has no uri and there is no GLB binary chunk")
+            data = glb_bin
+        elif uri.startswith("data:"):
+            try:
+                data = base64.b64decode(uri.split(",", 1)[1], validate=False)
+            except (IndexError, binascii.Error) as e:
+                raise _CorruptError(f"buffers[{i}] has a bad data URI ({e})") from None
+        else:
+            file = base / unquote(uri)
+            try:
+                data = file.read_bytes()
+            except OSError as e:
+                raise _CorruptError(f"buffers[{i}]: cannot read {file} ({e.strerror})") from None
+        if len(data) < int(buf["byteLength"]):
+            raise _CorruptError(f"truncated: buffers[{i}] has {len(data)} of its "
+                           f"{buf['byteLength']} bytes")
+        buffers.append(data)
+    return buffers
+
+
+def _normalized_to_float(a: np.ndarray) -> np.ndarray:
+    """glTF's normalized integer attributes to [0, 1] or [-1, 1]."""
+    info = np.iinfo(a.dtype)
+    x = a.astype(np.float64) / info.max
+    return np.maximum(x, -1.0) if info.min < 0 else x
+
+
+def _read_accessor(doc: dict[str, Any], buffers: list[bytes], index: int) -> np.ndarray:
+    """Accessor ``index`` as an array (count, components), sparse values applied."""
+    acc = doc["accessors"][index]
+    dtype = np.dtype(_COMPONENT_DTYPES[acc["componentType"]])
+    n = _TYPE_SIZES[acc["type"]]
+    count = int(acc["count"])
+    if "bufferView" in acc:
+        out = _read_view(doc, buffers, acc["bufferView"], acc.get("byteOffset", 0), dtype,
+                         count, n)
+    else:
+        out = np.zeros((count, n), dtype=dtype)
+    sparse = acc.get("sparse")
+    if sparse:
+        k = int(sparse["count"])
+        si, sv = sparse["indices"], sparse["values"]
+        idx_dtype = np.dtype(_COMPONENT_DTYPES[si["componentType"]])
+        idx = _read_view(doc, buffers, si["bufferView"], si.get("byteOffset", 0), idx_dtype, k,
+                         1).ravel().astype(np.int64)
+        vals = _read_view(doc, buffers, sv["bufferView"], sv.get("byteOffset", 0), dtype, k, n)
+        if k and (idx.min() < 0 or idx.max() >= count):
+            raise _CorruptError(f"accessors[{index}]: sparse index out of range")
+        out = out.copy()
+        out[idx] = vals
+    if acc.get("normalized") and dtype.kind in "iu":
+        return _normalized_to_float(out)
+    return out
+
+
+def _read_view(
+    doc: dict[str, Any], buffers: list[bytes], view_index: int, offset: int,
+    dtype: np.dtype, count: int, n: int,
+) -> np.ndarray:
+    view = doc["bufferViews"][view_index]
+    buf = buffers[view["buffer"]]
+    start = int(view.get("byteOffset", 0)) + int(offset)
+    elem = dtype.itemsize * n
+    stride = int(view.get("byteStride") or elem)
+    end = start + stride * (count - 1) + elem if count else start
+    view_end = int(view.get("byteOffset", 0)) + int(view["byteLength"])
+    if end > view_end or view_end > len(buf) or start < 0 or stride < elem:
+        raise _CorruptError(f"bufferViews[{view_index}] is out of range of its buffer (truncated?)")
+    if count == 0:
+        return np.zeros((0, n), dtype=dtype)
+    arr = np.ndarray((count, n), dtype=dtype, buffer=buf, offset=start,
+                     strides=(stride, dtype.itemsize))
+    return arr.copy()
+
+
+# ------------------------------------------------------------------------- nodes
+
+
+def _quaternion_matrix(q: list[float]) -> np.ndarray:
+    x, y, z, w = (float(v) for v in q)
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if norm == 0.0:
+        return np.eye(3)
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def _local_matrix(node: dict[str, Any]) -> np.ndarray:
+    if "matrix" in node:
+        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major
+    m = np.eye(4)
+    m[:3, :3] = _quaternion_matrix(node.get("rotation", [0, 0, 0, 1])) * np.array(
+        node.get("scale", [1, 1, 1]), dtype=np.float64
+    )
+    m[:3, 3] = node.get("translation", [0, 0, 0])
+    return m
+
+
+def _walk_nodes(doc: dict[str, Any]) -> Iterator[tuple[int, dict[str, Any], np.ndarray]]:
+    """Depth-first (index, node, world matrix in Z-up) over the default scene."""
+    nodes = doc.get("nodes", [])
+    scenes = doc.get("scenes")
+    if scenes:
+        roots = scenes[doc.get("scene", 0)].get("nodes", [])
+    else:
+        children = {c for n in nodes for c in n.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    to_z_up = np.eye(4)
+    to_z_up[:3, :3] = Y_UP_TO_Z_UP
+    stack = [(int(i), to_z_up, frozenset()) for i in reversed(roots)]
+    while stack:
+        index, parent, ancestors = stack.pop()
+        if index in ancestors:
+            raise _CorruptError(f"nodes[{index}] is its own ancestor (a cycle)")
+        node = nodes[index]
+        world = parent @ _local_matrix(node)
+        if not np.all(np.isfinite(world)):
+            raise _CorruptError(f"nodes[{index}] has a non-finite transform")
+        yield index, node, world
+        below = ancestors | {index}
+        stack.extend((int(c), world, below) for c in reversed(node.get("children", [])))
+
+
+# ----------------------------------------------------------------------- meshes
+
+
+def _triangulate(indices: np.ndarray, mode: int) -> np.ndarray | None:
+    """Faces (F, 3) of a TRIANGLES (4), TRIANGLE_STRIP (5) or TRIANGLE_FAN (6) primitive."""
+    n = len(indices)
+    if mode == 4:
+        return indices[: n - n % 3].reshape(-1, 3)
+    if n < 3:
+        return np.zeros((0, 3), dtype=np.int64)
+    i = np.arange(n - 2)
+    if mode == 5:
+        odd = i % 2
+        return np.stack([indices[i], indices[i + 1 + odd], indices[i + 2 - odd]], axis=1)
+    if mode == 6:
+        return np.stack([indices[i + 1], indices[i + 2], np.full(n - 2, indices[0])], axis=1)
+    return None
+
+
+def _primitive_triangles(
+    doc: dict[str, Any], buffers: list[bytes], prim: dict[str, Any], world: np.ndarray,
+    where: str,
+) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """World triangles (F, 3, 3) and normals (F, 3, 3) or None of one primitive."""
+    for ext in prim.get("extensions", {}):
+        if ext in _UNSUPPORTED_EXTENSIONS:
+            raise _CorruptError(f"{where} uses {ext}, which relray cannot read")
+    attributes = prim.get("attributes", {})
+    if "POSITION" not in attributes:
+        return None
+    positions = _read_accessor(doc, buffers, attributes["POSITION"]).astype(np.float64)[:, :3]
+    if "indices" in prim:
+        indices = _read_accessor(doc, buffers, prim["indices"]).ravel().astype(np.int64)
+        if len(indices) and (indices.min() < 0 or indices.max() >= len(positions)):
+            raise _CorruptError(f"{where}: index out of range ({len(positions)} vertices)")
+    else:
+        indices = np.arange(len(positions), dtype=np.int64)
+    faces = _triangulate(indices, int(prim.get("mode", 4)))
+    if faces is None:
+        log.warning("glTF %s: points and lines are not rendered", where)
+        return None
+    M3, t = world[:3, :3], world[:3, 3]
+    if np.linalg.det(M3) < 0:  # a mirroring transform reverses the winding (glTF spec)
+        faces = faces[:, [0, 2, 1]]
+    triangles = (positions @ M3.T + t)[faces]
+    normals = None
+    if "NORMAL" in attributes:
+        n = _read_accessor(doc, buffers, attributes["NORMAL"]).astype(np.float64)[:, :3]
+        if len(n) != len(positions):
+            raise _CorruptError(f"{where}: NORMAL and POSITION have different counts")
+        try:
+            normal_matrix = np.linalg.inv(M3).T
+        except np.linalg.LinAlgError:
+            normal_matrix = np.eye(3)
+        n = n @ normal_matrix.T
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+        normals = n[faces]
+    return triangles, normals
+
+
+def _face_normals_repeated(triangles: np.ndarray) -> np.ndarray:
+    return np.repeat(face_normals(triangles)[:, None, :], 3, axis=1)
+
+
+# -------------------------------------------------------------------- materials
+
+
+def _factor(
+    value: Any, default: list[float], where: str, lo: float, hi: float | None
+) -> list[float]:
+    v = default if value is None else value
+    v = [float(x) for x in (v if isinstance(v, list) else [v])]
+    if len(v) != len(default) or not all(math.isfinite(x) for x in v):
+        raise _CorruptError(f"{where} must be {len(default)} finite numbers")
+    if any(x < lo or (hi is not None and x > hi) for x in v):
+        rng = f"[{lo:g}, {hi:g}]" if hi is not None else f">= {lo:g}"
+        raise _CorruptError(f"{where} must be in {rng}")
+    return v
+
+
+def _material(doc_mat: dict[str, Any], index: int) -> MaterialSpec:
+    where = f"materials[{index}]"
+    pbr = doc_mat.get("pbrMetallicRoughness", {})
+    ext = doc_mat.get("extensions", {})
+    base = _factor(pbr.get("baseColorFactor"), [1.0] * 4, f"{where}.baseColorFactor", 0, 1)
+    metallic = _factor(pbr.get("metallicFactor"), [1.0], f"{where}.metallicFactor", 0, 1)[0]
+    roughness = _factor(pbr.get("roughnessFactor"), [1.0], f"{where}.roughnessFactor", 0, 1)[0]
+    emissive = _factor(doc_mat.get("emissiveFactor"), [0.0] * 3, f"{where}.emissiveFactor", 0, 1)
+    strength = _factor(ext.get("KHR_materials_emissive_strength", {}).get("emissiveStrength"),
+                       [1.0], f"{where}.emissiveStrength", 0, None)[0]
+    transmission = _factor(ext.get("KHR_materials_transmission", {}).get("transmissionFactor"),
+                           [0.0], f"{where}.transmissionFactor", 0, 1)[0]
+    ior = _factor(ext.get("KHR_materials_ior", {}).get("ior"), [1.5], f"{where}.ior", 0, None)[0]
+    if ior < 1.0:  # glTF allows 0 (an "infinite" IOR) and nothing below 1 otherwise
+        log.warning("glTF %s: ior %g is not supported, using 1.5", where, ior)
+        ior = 1.5
+    if any(k in pbr for k in ("baseColorTexture", "metallicRoughnessTexture")) or any(
+        k in doc_mat for k in ("normalTexture", "emissiveTexture", "occlusionTexture")
+    ):
+        log.warning("glTF %s: textures are ignored (only the factors are used)", where)
+    return MaterialSpec(
+        name=str(doc_mat.get("name") or f"gltf_material_{index}"),
+        base_color=(base[0], base[1], base[2]),
+        roughness=roughness,
+        metallic=metallic,
+        transmission=transmission,
+        ior=min(ior, 100.0),
+        emission=(emissive[0], emissive[1], emissive[2]),
+        emission_strength=strength if any(emissive) else 0.0,
+    )
+
+
+#: Material of primitives without one: Blender's default surface.
+DEFAULT_MATERIAL = MaterialSpec(name="gltf_default", base_color=(0.8, 0.8, 0.8),
+                                roughness=0.5, metallic=0.0)
+
+
+# ------------------------------------------------------------------ light, camera
+
+
+def _light(spec: dict[str, Any], world: np.ndarray, where: str) -> LightSpec:
+    kind = spec.get("type")
+    color = _factor(spec.get("color"), [1.0] * 3, f"{where}.color", 0, None)
+    intensity = _factor(spec.get("intensity"), [1.0], f"{where}.intensity", 0, None)[0]
+    direction = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    norm = float(np.linalg.norm(direction))
+    direction = direction / norm if norm > 0 else np.array([0.0, 0.0, -1.0])
+    common = {
+        "position": _ro(world[:3, 3]),
+        "direction": _ro(direction),
+        "color": _ro(np.array(color)),
+        "name": str(spec.get("name", "")),
+    }
+    if kind == "directional":
+        return LightSpec(type="sun", power=intensity / WATTS_TO_LUMENS, **common)
+    power = intensity * 4.0 * math.pi / WATTS_TO_LUMENS
+    if kind == "point":
+        return LightSpec(type="point", power=power, **common)
+    if kind == "spot":
+        cone = spec.get("spot", {})
+        outer = _factor(cone.get("outerConeAngle"), [math.pi / 4], f"{where}.outerConeAngle",
+                        0, math.pi / 2)[0]
+        inner = _factor(cone.get("innerConeAngle"), [0.0], f"{where}.innerConeAngle", 0,
+                        outer)[0]
+        if outer <= 0.0:
+            raise _CorruptError(f"{where}.outerConeAngle must be > 0")
+        return LightSpec(type="spot", power=power, spot_size=2.0 * outer,
+                         spot_blend=1.0 - inner / outer, **common)
+    raise _CorruptError(f"{where}.type '{kind}' is not point, spot or directional")
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+def _camera_settings(cam: dict[str, Any], world: np.ndarray, where: str) -> CameraSettings:
+    yfov = float(cam["perspective"]["yfov"])
+    if not 0.0 < yfov < math.pi:
+        raise _CorruptError(f"{where}.perspective.yfov must be in (0, pi) radians")
+    R = world[:3, :3]
+    scale = np.linalg.norm(R, axis=0)
+    if np.any(scale <= 0):
+        raise _CorruptError(f"{where}: the camera's node has a zero scale")
+    U, _, Vt = np.linalg.svd(R / scale)
+    rotation = U @ Vt
+    if np.linalg.det(rotation) < 0:
+        raise _CorruptError(f"{where}: the camera's node is mirrored")
+    return CameraSettings(position=_ro(world[:3, 3]), rotation=_ro(rotation),
+                          fov=math.degrees(yfov))
+
+
+def _first_camera(doc: dict[str, Any]) -> CameraSettings | None:
+    cameras = doc.get("cameras", [])
+    for index, node, world in _walk_nodes(doc):
+        if "camera" in node:
+            cam = cameras[node["camera"]]
+            if cam.get("type") == "perspective":
+                return _camera_settings(cam, world, f"cameras[{node['camera']}]")
+            log.warning("glTF nodes[%d]: orthographic cameras are skipped", index)
+    return None
+
+
+# ---------------------------------------------------------------------- public
+
+
+def _user_error(path: Path, key: str, job_file: str | Path | None, reason: str) -> UserError:
+    return UserError(f"cannot read glTF file {path}: {reason}", key=key,
+                     file=job_file if job_file is not None else path)
+
+
+def _guarded(path: Path, key: str, job_file: str | Path | None, func: Any) -> Any:
+    try:
+        return func()
+    except _CorruptError as e:
+        raise _user_error(path, key, job_file, str(e)) from None
+    except OSError as e:
+        raise _user_error(path, key, job_file, e.strerror or str(e)) from None
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, struct.error) as e:
+        raise _user_error(path, key, job_file, f"malformed ({type(e).__name__}: {e})") from None
+
+
+def find_camera(
+    path: str | Path, *, key: str = "scene.file", job_file: str | Path | None = None
+) -> CameraSettings | None:
+    """The file's first perspective camera, or None. Reads only the JSON part."""
+    path = Path(path)
+    return _guarded(path, key, job_file, lambda: _first_camera(_read_document(path)[0]))
+
+
+def load_gltf(
+    path: str | Path, *, key: str = "scene.file", job_file: str | Path | None = None
+) -> GltfResult:
+    """Read a .glb/.gltf file into lab-frame (Z-up) arrays.
+
+    Returns ``(triangles, normals, material_ids, materials, lights, camera)``:
+    triangles float64 (T, 3, 3); normals float64 (T, 3, 3) or None when no primitive
+    has normals; material_ids int32 (T,) indexing ``materials``; lights (point, spot,
+    sun); the first perspective camera or None. Errors name ``key`` in ``job_file``.
+    """
+    path = Path(path)
+    return _guarded(path, key, job_file, lambda: _load(path))
+
+
+def _load(path: Path) -> GltfResult:
+    doc, glb_bin = _read_document(path)
+    buffers = _load_buffers(doc, path.parent, glb_bin)
+    materials = [_material(m, i) for i, m in enumerate(doc.get("materials", []))]
+    default_id: int | None = None
+    tris, norms, mids = [], [], []
+    lights: list[LightSpec] = []
+    light_defs = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+    for _, node, world in _walk_nodes(doc):
+        if "mesh" in node:
+            mesh = doc["meshes"][node["mesh"]]
+            for p, prim in enumerate(mesh["primitives"]):
+                where = f"meshes[{node['mesh']}].primitives[{p}]"
+                got = _primitive_triangles(doc, buffers, prim, world, where)
+                if got is None or len(got[0]) == 0:
+                    continue
+                if "material" in prim:
+                    mid = int(prim["material"])
+                    if not 0 <= mid < len(materials):
+                        raise _CorruptError(f"{where}.material {mid} does not exist")
+                else:
+                    if default_id is None:
+                        default_id = len(materials)
+                        materials.append(DEFAULT_MATERIAL)
+                    mid = default_id
+                tris.append(got[0])
+                norms.append(got[1])
+                mids.append(np.full(len(got[0]), mid, dtype=np.int32))
+        light_ref = node.get("extensions", {}).get("KHR_lights_punctual")
+        if light_ref is not None:
+            li = int(light_ref["light"])
+            lights.append(_light(light_defs[li], world, f"KHR_lights_punctual.lights[{li}]"))
+    triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
+    normals = None
+    if any(n is not None for n in norms):
+        filled = [n if n is not None else _face_normals_repeated(t)
+                  for t, n in zip(tris, norms, strict=True)]
+        normals = np.concatenate(filled)
+    material_ids = np.concatenate(mids) if mids else np.zeros(0, dtype=np.int32)
+    return triangles, normals, material_ids, materials, lights, _first_camera(doc)

@@ -1,0 +1,248 @@
+"""The in-memory scene the renderer consumes: flat float32 triangle arrays.
+
+:func:`build_scene` turns a validated :class:`~relray.core.job.Job` into a
+:class:`Scene`, in this order (material ids follow the same order):
+
+1. the glTF file's meshes, materials, punctual lights and first camera
+   (:mod:`relray.core.gltf`), if ``scene.file`` is set;
+2. the job's ``[[materials]]`` and ``[[objects]]``: spheres, boxes and quads are
+   tessellated by :mod:`relray.core.shapes`, meshes are read from their file
+   (.ply/.obj/.stl through trimesh, .glb/.gltf through :mod:`relray.core.gltf`);
+3. the job's ``[[lights]]``: point, spot and sun lights are passed on; each **area
+   light becomes an emissive quad** with its own material.
+
+============================  ===============================================================
+area light ->                 emissive quad
+============================  ===============================================================
+geometry                      ``size[0]`` × ``size[1]`` rectangle at ``position``, front face
+                              towards ``direction`` (:func:`relray.core.shapes.area_light_quad`)
+material                      black (``base_color`` 0), ``emission`` = light ``color``,
+                              ``one_sided_emission`` = true
+``emission_strength``         L = P / (π · A), as Blender/Cycles: a Lambertian emitter of
+                              area A and radiance L emits P = π · A · L from its front
+============================  ===============================================================
+
+Triangles with zero area or non-finite vertices are dropped, counted in
+``Scene.dropped_degenerate`` and reported once as a warning on the "relray" logger.
+Shading normals are unit length; a zero or non-finite one is replaced by the face
+normal. When any part of the scene has shading normals, the rest gets its face
+normals, so ``normals`` is either complete or None.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import gltf, shapes
+from .errors import UserError
+from .job import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
+
+log = logging.getLogger("relray")
+
+#: A triangle is degenerate when |e1 × e2| <= DEGENERATE_TOL · (|e1|² + |e2|²).
+DEGENERATE_TOL = 1e-12
+
+
+@dataclass
+class Scene:
+    """Lab-frame geometry, materials and lights of one static scene."""
+
+    triangles: np.ndarray  # float32 (T, 3, 3) lab-frame vertex positions
+    normals: np.ndarray | None  # float32 (T, 3, 3) unit per-vertex shading normals, or None
+    material_ids: np.ndarray  # int32 (T,), indexes ``materials``
+    materials: list[MaterialSpec]
+    lights: list[LightSpec]  # point, spot and sun only
+    background: np.ndarray  # float64 (3,) RGB radiance of the sky
+    camera: CameraSettings | None  # the glTF file's first camera, if any
+    dropped_degenerate: int = 0
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned (min, max) corners, float64 (3,) each; zeros for an empty scene."""
+        if len(self.triangles) == 0:
+            return np.zeros(3), np.zeros(3)
+        pts = self.triangles.reshape(-1, 3).astype(np.float64)
+        return pts.min(axis=0), pts.max(axis=0)
+
+
+@dataclass
+class _Part:
+    triangles: np.ndarray  # float64 (F, 3, 3)
+    normals: np.ndarray | None  # float64 (F, 3, 3)
+    material_id: np.ndarray | int
+
+
+def _repeat_face_normals(triangles: np.ndarray) -> np.ndarray:
+    return np.repeat(shapes.face_normals(triangles)[:, None, :], 3, axis=1)
+
+
+def _transform_mesh(
+    triangles: np.ndarray, normals: np.ndarray | None, params: dict
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """v -> Rz · (scale ⊙ (axes-converted v)) + translate; normals by the inverse transpose."""
+    linear = shapes.rotation_z(params["rotation_z"]) @ np.diag(params["scale"])
+    if params["up"] == "y" and params["file"].suffix.lower() not in (".glb", ".gltf"):
+        linear = linear @ gltf.Y_UP_TO_Z_UP  # glTF files are converted while reading
+    tris = triangles @ linear.T + params["translate"]
+    if np.linalg.det(linear) < 0:  # never for scale > 0, kept for safety
+        tris = tris[:, [0, 2, 1]]
+        normals = normals[:, [0, 2, 1]] if normals is not None else None
+    if normals is not None:
+        normals = normals @ np.linalg.inv(linear)  # (M^-T n) for row vectors
+    return tris, normals
+
+
+def _read_mesh_file(params: dict, key: str, job_file: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    path: Path = params["file"]
+    if path.suffix.lower() in (".glb", ".gltf"):
+        triangles, normals, *_ = gltf.load_gltf(path, key=key, job_file=job_file)
+        if params["up"] == "z":  # the file is Z-up after all: undo the reader's conversion
+            back = gltf.Y_UP_TO_Z_UP.T
+            triangles = triangles @ back.T
+            normals = normals @ back.T if normals is not None else None
+        return triangles, normals
+    import trimesh  # slow to import: only when a job has a mesh
+
+    try:
+        mesh = trimesh.load_mesh(str(path), process=False)
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+        vertex_normals = np.asarray(mesh.vertex_normals) if params["smooth"] else None
+    except Exception as e:  # trimesh raises many kinds of error for a bad file
+        raise UserError(f"cannot read mesh file {path}: {type(e).__name__}: {e}", key=key,
+                        file=job_file) from None
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise UserError(f"mesh file {path} has no triangles", key=key, file=job_file)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise UserError(f"mesh file {path} has out-of-range face indices", key=key,
+                        file=job_file)
+    return vertices[faces], vertex_normals[faces] if vertex_normals is not None else None
+
+
+def tessellate(obj: ObjectSpec, key: str, job_file: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Triangles (F, 3, 3) and shading normals (F, 3, 3) or None of one job object.
+
+    ``key`` ("objects[3]") names the object in errors about its mesh file.
+    """
+    p = obj.params
+    if obj.shape == "sphere":
+        return shapes.sphere(p["center"], p["radius"], p["subdivisions"])
+    if obj.shape == "box":
+        return shapes.box(p["center"], p["size"], p["rotation_z"]), None
+    if obj.shape == "quad":
+        return shapes.quad(p["corners"]), None
+    if obj.shape == "mesh":
+        triangles, normals = _read_mesh_file(p, f"{key}.file", job_file)
+        if len(triangles) == 0:
+            raise UserError(f"mesh file {p['file']} has no triangles", key=f"{key}.file",
+                            file=job_file)
+        return _transform_mesh(triangles, normals, p)
+    raise ValueError(f"unknown shape {obj.shape!r}")  # job.py has validated the shape
+
+
+def area_light_material(light: LightSpec, index: int) -> MaterialSpec:
+    """The emissive material of an area light: L = P / (π A), one-sided, black."""
+    area = light.size[0] * light.size[1]
+    return MaterialSpec(
+        name=f"area_light:{light.name or index}",
+        base_color=(0.0, 0.0, 0.0),
+        roughness=1.0,
+        emission=(float(light.color[0]), float(light.color[1]), float(light.color[2])),
+        emission_strength=light.power / (math.pi * area),
+        one_sided_emission=True,
+    )
+
+
+def _drop_degenerate(
+    triangles: np.ndarray, normals: np.ndarray | None, material_ids: np.ndarray
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, int]:
+    """Remove triangles with zero area or non-finite vertices (tested in float32)."""
+    t = triangles.astype(np.float32).astype(np.float64)
+    finite = np.all(np.isfinite(t), axis=(1, 2))
+    t = np.where(finite[:, None, None], t, 0.0)
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    cross = np.linalg.norm(np.cross(e1, e2), axis=1)
+    scale = (e1 * e1).sum(axis=1) + (e2 * e2).sum(axis=1)
+    keep = finite & (cross > DEGENERATE_TOL * scale) & (cross > 0.0)
+    dropped = int(len(keep) - keep.sum())
+    if dropped:
+        triangles, material_ids = triangles[keep], material_ids[keep]
+        normals = normals[keep] if normals is not None else None
+    return triangles, normals, material_ids, dropped
+
+
+def _clean_normals(normals: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """Unit shading normals; a zero or non-finite one becomes the face normal."""
+    length = np.linalg.norm(normals, axis=2, keepdims=True)
+    good = np.isfinite(length) & (length > 1e-20)
+    unit = np.divide(normals, np.where(good, length, 1.0))
+    return np.where(good, unit, _repeat_face_normals(triangles))
+
+
+def build_scene(job: Job) -> Scene:
+    """The scene of a validated job (see the module docstring)."""
+    parts: list[_Part] = []
+    materials: list[MaterialSpec] = []
+    lights: list[LightSpec] = []
+    camera = None
+    if job.scene.file is not None:
+        tris, norms, mids, mats, gl_lights, camera = gltf.load_gltf(
+            job.scene.file, key="scene.file", job_file=job.path
+        )
+        parts.append(_Part(tris, norms, mids))
+        materials += mats
+        lights += gl_lights
+    ids = {m.name: len(materials) + i for i, m in enumerate(job.scene.materials)}
+    materials += job.scene.materials
+    for i, obj in enumerate(job.scene.objects):
+        tris, norms = tessellate(obj, f"objects[{i}]", job.path)
+        parts.append(_Part(tris, norms, ids[obj.material]))
+    for i, light in enumerate(job.scene.lights):
+        if light.type != "area":
+            lights.append(light)
+            continue
+        quad = shapes.area_light_quad(light.position, light.direction, light.size)
+        parts.append(_Part(quad, None, len(materials)))
+        materials.append(area_light_material(light, i))
+
+    triangles, normals, material_ids = _concatenate(parts)
+    triangles, normals, material_ids, dropped = _drop_degenerate(triangles, normals,
+                                                                 material_ids)
+    if dropped:
+        log.warning("dropped %d degenerate triangles (zero area or non-finite vertices)",
+                    dropped)
+    if len(triangles) == 0:
+        why = f" (all {dropped} were degenerate)" if dropped else ""
+        raise UserError(f"the scene has no triangles{why}", key="scene", file=job.path)
+    if normals is not None:
+        normals = _clean_normals(normals, triangles)
+    return Scene(
+        triangles=np.ascontiguousarray(triangles, dtype=np.float32),
+        normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
+        material_ids=np.ascontiguousarray(material_ids, dtype=np.int32),
+        materials=materials,
+        lights=lights,
+        background=np.array(job.scene.background, dtype=np.float64),
+        camera=camera,
+        dropped_degenerate=dropped,
+    )
+
+
+def _concatenate(parts: list[_Part]) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    parts = [p for p in parts if len(p.triangles)]
+    if not parts:
+        return np.zeros((0, 3, 3)), None, np.zeros(0, dtype=np.int32)
+    triangles = np.concatenate([p.triangles for p in parts])
+    ids = np.concatenate([np.broadcast_to(np.asarray(p.material_id, dtype=np.int32),
+                                          (len(p.triangles),)) for p in parts])
+    normals = None
+    if any(p.normals is not None for p in parts):
+        normals = np.concatenate([
+            p.normals if p.normals is not None else _repeat_face_normals(p.triangles)
+            for p in parts
+        ])
+    return triangles, normals, ids

@@ -1,0 +1,340 @@
+"""glTF import: files built in the test with pygltflib (an independent writer) and trimesh."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pygltflib as g
+import pytest
+from scipy.spatial.transform import Rotation
+
+from relray.core import gltf, job, scene
+from relray.core.errors import UserError
+
+C = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # (x, y, z) -> (x, -z, y)
+
+
+class GlbBuilder:
+    """Accumulates arrays into one binary buffer and makes accessors for them."""
+
+    def __init__(self) -> None:
+        self.blob = bytearray()
+        self.accessors: list[g.Accessor] = []
+        self.views: list[g.BufferView] = []
+
+    def add(self, array: np.ndarray, component: int, kind: str) -> int:
+        while len(self.blob) % 4:
+            self.blob += b"\0"
+        data = np.ascontiguousarray(array).tobytes()
+        self.views.append(g.BufferView(buffer=0, byteOffset=len(self.blob), byteLength=len(data)))
+        self.blob += data
+        count = len(array)
+        self.accessors.append(
+            g.Accessor(bufferView=len(self.views) - 1, componentType=component, count=count,
+                       type=kind)
+        )
+        return len(self.accessors) - 1
+
+    def finish(self, gl: g.GLTF2, path: Path) -> Path:
+        gl.accessors = self.accessors
+        gl.bufferViews = self.views
+        gl.buffers = [g.Buffer(byteLength=len(self.blob))]
+        gl.set_binary_blob(bytes(self.blob))
+        gl.save(str(path))
+        return path
+
+
+QUAD_POS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], np.float32)
+QUAD_IDX = np.array([0, 1, 2, 0, 2, 3], np.uint16)
+QUAD_NRM = np.tile(np.array([0, 0, 1], np.float32), (4, 1))
+
+ROOT_T = [1.0, 2.0, 3.0]
+ROOT_Q = Rotation.from_euler("y", 90, degrees=True).as_quat().tolist()  # x, y, z, w
+CHILD_S = [2.0, 2.0, 2.0]
+LIGHT_Q = Rotation.from_euler("x", -90, degrees=True).as_quat().tolist()  # -Z -> -Y (down)
+SPOT_CD = 100.0
+
+
+def build_test_glb(path: Path) -> Path:
+    """A quad under a two-level node hierarchy, a material with extensions, a second
+    primitive without material, three punctual lights and a perspective camera."""
+    b = GlbBuilder()
+    pos = b.add(QUAD_POS, g.FLOAT, g.VEC3)
+    nrm = b.add(QUAD_NRM, g.FLOAT, g.VEC3)
+    idx = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
+    tri_pos = b.add(np.array([[0, 0, 0], [0, 0, 1], [0, 1, 0]], np.float32), g.FLOAT, g.VEC3)
+    material = g.Material(
+        name="glowing",
+        pbrMetallicRoughness=g.PbrMetallicRoughness(
+            baseColorFactor=[0.5, 0.25, 0.125, 1.0], metallicFactor=0.3, roughnessFactor=0.6
+        ),
+        emissiveFactor=[1.0, 0.5, 0.0],
+        extensions={
+            "KHR_materials_emissive_strength": {"emissiveStrength": 5.0},
+            "KHR_materials_transmission": {"transmissionFactor": 0.7},
+            "KHR_materials_ior": {"ior": 1.33},
+        },
+    )
+    lights = [
+        {"type": "spot", "intensity": SPOT_CD, "color": [1.0, 0.9, 0.8],
+         "spot": {"outerConeAngle": math.pi / 6, "innerConeAngle": math.pi / 12}},
+        {"type": "point", "intensity": 1000.0 * 683.0 / (4.0 * math.pi)},
+        {"type": "directional", "intensity": 683.0 * 3.0},
+    ]
+    gl = g.GLTF2(
+        scene=0,
+        scenes=[g.Scene(nodes=[0, 2, 3, 4, 5])],
+        nodes=[
+            g.Node(translation=ROOT_T, rotation=ROOT_Q, children=[1]),
+            g.Node(scale=CHILD_S, mesh=0),
+            g.Node(translation=[0.0, 5.0, 0.0], rotation=LIGHT_Q,
+                   extensions={"KHR_lights_punctual": {"light": 0}}),
+            g.Node(translation=[0.0, 1.0, 5.0], camera=0),
+            g.Node(translation=[3.0, 3.0, 3.0], extensions={"KHR_lights_punctual": {"light": 1}}),
+            g.Node(rotation=LIGHT_Q, extensions={"KHR_lights_punctual": {"light": 2}}),
+        ],
+        meshes=[
+            g.Mesh(primitives=[
+                g.Primitive(attributes=g.Attributes(POSITION=pos, NORMAL=nrm), indices=idx,
+                            material=0),
+                g.Primitive(attributes=g.Attributes(POSITION=tri_pos)),
+            ])
+        ],
+        materials=[material],
+        cameras=[g.Camera(type="perspective",
+                          perspective=g.Perspective(yfov=0.8, znear=0.1, aspectRatio=1.5))],
+        extensions={"KHR_lights_punctual": {"lights": lights}},
+        extensionsUsed=["KHR_lights_punctual", "KHR_materials_emissive_strength",
+                        "KHR_materials_transmission", "KHR_materials_ior"],
+    )
+    return b.finish(gl, path)
+
+
+def expected_world(points: np.ndarray) -> np.ndarray:
+    """Root T·R, child S, then Y-up -> Z-up, computed independently with scipy."""
+    p = np.asarray(points, float) * CHILD_S
+    p = Rotation.from_quat(ROOT_Q).apply(p) + ROOT_T
+    return p @ C.T
+
+
+@pytest.fixture
+def glb(tmp_path: Path) -> Path:
+    return build_test_glb(tmp_path / "scene.glb")
+
+
+def test_geometry_through_node_hierarchy(glb: Path) -> None:
+    tris, normals, mids, mats, _, _ = gltf.load_gltf(glb)
+    assert tris.shape == (3, 3, 3)
+    want = expected_world(QUAD_POS)[QUAD_IDX.reshape(-1, 3)]
+    np.testing.assert_allclose(tris[:2], want, atol=1e-6)
+    # the quad's +z normal: rotated by R_y(90) to +x, then unchanged by the axis swap
+    np.testing.assert_allclose(normals[:2], np.tile([1.0, 0.0, 0.0], (2, 3, 1)), atol=1e-6)
+    # the primitive without normals gets its face normal
+    face = np.cross(tris[2, 1] - tris[2, 0], tris[2, 2] - tris[2, 0])
+    np.testing.assert_allclose(normals[2], np.tile(face / np.linalg.norm(face), (3, 1)))
+    assert list(mids) == [0, 0, 1]
+    assert mats[1] == gltf.DEFAULT_MATERIAL
+
+
+def test_y_up_becomes_z_up() -> None:
+    np.testing.assert_array_equal(gltf.Y_UP_TO_Z_UP @ [0, 1, 0], [0, 0, 1])
+    np.testing.assert_array_equal(gltf.Y_UP_TO_Z_UP @ [0, 0, 1], [0, -1, 0])
+    assert np.linalg.det(gltf.Y_UP_TO_Z_UP) == pytest.approx(1.0)
+
+
+def test_materials(glb: Path) -> None:
+    m = gltf.load_gltf(glb)[3][0]
+    assert m.name == "glowing"
+    assert m.base_color == pytest.approx((0.5, 0.25, 0.125))
+    assert (m.metallic, m.roughness) == pytest.approx((0.3, 0.6))
+    assert m.emission == pytest.approx((1.0, 0.5, 0.0))
+    assert m.emission_strength == pytest.approx(5.0)
+    assert m.transmission == pytest.approx(0.7)
+    assert m.ior == pytest.approx(1.33)
+
+
+def test_punctual_lights_blender_conversion(glb: Path) -> None:
+    spot, point, sun = gltf.load_gltf(glb)[4]
+    assert spot.type == "spot"
+    np.testing.assert_allclose(spot.position, C @ [0, 5, 0])  # (0, 0, 5)
+    np.testing.assert_allclose(spot.direction, [0, 0, -1], atol=1e-12)  # glTF -Y is down
+    assert spot.power == pytest.approx(SPOT_CD * 4 * math.pi / 683)
+    assert spot.spot_size == pytest.approx(math.pi / 3)
+    assert spot.spot_blend == pytest.approx(0.5)
+    np.testing.assert_allclose(spot.color, [1.0, 0.9, 0.8])
+    assert point.type == "point" and point.power == pytest.approx(1000.0)
+    np.testing.assert_allclose(point.position, C @ [3, 3, 3])
+    assert sun.type == "sun" and sun.power == pytest.approx(3.0)  # W/m^2 from lux
+    np.testing.assert_allclose(sun.direction, [0, 0, -1], atol=1e-12)
+
+
+def test_camera(glb: Path) -> None:
+    cam = gltf.load_gltf(glb)[5]
+    np.testing.assert_allclose(cam.position, [0, -5, 1])
+    np.testing.assert_allclose(cam.forward, [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(cam.rotation[:, 0], [1, 0, 0], atol=1e-12)  # right
+    np.testing.assert_allclose(cam.rotation[:, 1], [0, 0, 1], atol=1e-12)  # up
+    assert cam.fov == pytest.approx(math.degrees(0.8))
+    assert gltf.find_camera(glb).fov == pytest.approx(cam.fov)
+
+
+def test_gltf_with_data_uri_and_external_bin(glb: Path, tmp_path: Path) -> None:
+    ref = gltf.load_gltf(glb)[0]
+    for fmt, name in ((g.BufferFormat.DATAURI, "embedded.gltf"),
+                      (g.BufferFormat.BINFILE, "external.gltf")):
+        doc = g.GLTF2().load(str(glb))
+        doc.convert_buffers(fmt)
+        out = tmp_path / name
+        if fmt == g.BufferFormat.BINFILE:
+            doc.buffers[0].uri = "external.bin"
+            (tmp_path / "external.bin").write_bytes(g.GLTF2().load(str(glb)).binary_blob())
+        doc.save(str(out))
+        np.testing.assert_allclose(gltf.load_gltf(out)[0], ref)
+
+
+def test_trimesh_export_round_trip(tmp_path: Path) -> None:
+    import trimesh
+
+    box = trimesh.creation.box(extents=[1.0, 2.0, 3.0])
+    sc = trimesh.Scene()
+    transform = trimesh.transformations.rotation_matrix(0.3, [1, 1, 0])
+    transform[:3, 3] = [0.5, -1.0, 2.0]
+    sc.add_geometry(box, transform=transform)
+    path = tmp_path / "box.glb"
+    sc.export(str(path))
+    tris = gltf.load_gltf(path)[0]
+    want = (box.vertices @ transform[:3, :3].T + transform[:3, 3]) @ C.T
+    assert tris.shape == (12, 3, 3)
+    np.testing.assert_allclose(np.sort(tris.reshape(-1, 3), axis=0),
+                               np.sort(want[box.faces].reshape(-1, 3), axis=0), atol=1e-5)
+
+
+def test_strip_and_mirrored_node(tmp_path: Path) -> None:
+    b = GlbBuilder()
+    pos = b.add(QUAD_POS[[0, 1, 3, 2]], g.FLOAT, g.VEC3)  # a strip 0-1-3-2 covers the quad
+    nrm = b.add(QUAD_NRM, g.FLOAT, g.VEC3)
+    prim = g.Primitive(attributes=g.Attributes(POSITION=pos, NORMAL=nrm), mode=g.TRIANGLE_STRIP)
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0, 1])],
+                 nodes=[g.Node(mesh=0), g.Node(mesh=0, scale=[1, 1, -1])],
+                 meshes=[g.Mesh(primitives=[prim])])
+    tris, normals, *_ = gltf.load_gltf(b.finish(gl, tmp_path / "strip.glb"))
+    assert tris.shape == (4, 3, 3)
+    geometric = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    # winding agrees with the shading normal, also under the mirroring node
+    assert np.all(np.einsum("ij,ij->i", geometric, normals[:, 0]) > 0)
+    area = 0.5 * np.linalg.norm(geometric, axis=1)
+    np.testing.assert_allclose(area, 0.5)
+
+
+def test_interleaved_and_sparse_accessors(tmp_path: Path) -> None:
+    interleaved = np.concatenate([QUAD_POS, QUAD_NRM], axis=1)  # stride 24: P P P N N N
+    sparse_idx = np.array([2], np.uint16)
+    sparse_val = np.array([[1.0, 1.0, 5.0]], np.float32)  # lift corner 2
+    blob = interleaved.tobytes() + sparse_idx.tobytes() + b"\0\0" + sparse_val.tobytes()
+    views = [
+        g.BufferView(buffer=0, byteOffset=0, byteLength=96, byteStride=24),
+        g.BufferView(buffer=0, byteOffset=96, byteLength=2),
+        g.BufferView(buffer=0, byteOffset=100, byteLength=12),
+    ]
+    sparse = g.Sparse(
+        count=1,
+        indices=g.AccessorSparseIndices(bufferView=1, componentType=g.UNSIGNED_SHORT),
+        values=g.AccessorSparseValues(bufferView=2),
+    )
+    accessors = [
+        g.Accessor(bufferView=0, byteOffset=0, componentType=g.FLOAT, count=4, type=g.VEC3,
+                   sparse=sparse),
+        g.Accessor(bufferView=0, byteOffset=12, componentType=g.FLOAT, count=4, type=g.VEC3),
+    ]
+    prim = g.Primitive(attributes=g.Attributes(POSITION=0, NORMAL=1), mode=g.TRIANGLE_FAN)
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
+                 meshes=[g.Mesh(primitives=[prim])], accessors=accessors, bufferViews=views,
+                 buffers=[g.Buffer(byteLength=len(blob))])
+    gl.set_binary_blob(blob)
+    gl.save(str(tmp_path / "interleaved.glb"))
+    tris, normals, *_ = gltf.load_gltf(tmp_path / "interleaved.glb")
+    pos = QUAD_POS.astype(float).copy()
+    pos[2] = [1.0, 1.0, 5.0]
+    fan = [[1, 2, 0], [2, 3, 0]]  # glTF fan: (v[i+1], v[i+2], v[0])
+    np.testing.assert_allclose(tris, (pos @ C.T)[fan])
+    np.testing.assert_allclose(normals, np.tile(C @ [0, 0, 1], (2, 3, 1)))
+
+
+def test_scene_from_gltf_plus_objects(glb: Path, tmp_path: Path) -> None:
+    (tmp_path / "job.toml").write_text(
+        '[scene]\nfile = "scene.glb"\n[[materials]]\nname = "red"\nbase_color = [1, 0, 0]\n'
+        '[[objects]]\nshape = "box"\ncenter = [0, 0, 0]\nsize = 1\nmaterial = "red"\n'
+    )
+    j = job.load_job(tmp_path / "job.toml")
+    assert j.camera is None  # the glTF supplies it
+    s = scene.build_scene(j)
+    assert s.camera is not None and s.camera.fov == pytest.approx(math.degrees(0.8))
+    assert [m.name for m in s.materials] == ["glowing", "gltf_default", "red"]
+    assert list(s.material_ids) == [0, 0, 1] + [2] * 12
+    assert [light.type for light in s.lights] == ["spot", "point", "sun"]
+    assert s.normals is not None and s.normals.shape == (15, 3, 3)
+
+
+def test_job_camera_kept_when_gltf_has_none(tmp_path: Path) -> None:
+    b = GlbBuilder()
+    pos = b.add(QUAD_POS, g.FLOAT, g.VEC3)
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
+                 meshes=[g.Mesh(primitives=[g.Primitive(attributes=g.Attributes(POSITION=pos),
+                                                        mode=g.TRIANGLE_FAN)])])
+    b.finish(gl, tmp_path / "nocam.glb")
+    (tmp_path / "job.toml").write_text('[scene]\nfile = "nocam.glb"\n')
+    j = job.load_job(tmp_path / "job.toml")
+    assert j.camera is not None
+    np.testing.assert_allclose(j.camera.position, [0, -3.9, 1])
+    assert scene.build_scene(j).triangles.shape == (2, 3, 3)
+
+
+def test_mesh_object_from_glb(glb: Path, tmp_path: Path) -> None:
+    (tmp_path / "job.toml").write_text(
+        '[[materials]]\nname = "m"\n[[objects]]\nshape = "mesh"\nfile = "scene.glb"\n'
+        'translate = [10, 0, 0]\nmaterial = "m"\n'
+    )
+    s = scene.build_scene(job.load_job(tmp_path / "job.toml"))
+    ref = gltf.load_gltf(glb)[0]
+    np.testing.assert_allclose(s.triangles, ref + [10, 0, 0], atol=1e-5)
+    assert list(s.material_ids) == [0, 0, 0]
+
+
+def _corrupt_variants(glb: Path) -> dict[str, bytes]:
+    raw = glb.read_bytes()
+    doc = g.GLTF2().load(str(glb))
+    doc.accessors[0].count = 10_000  # reads past its buffer view
+    bad_accessor = b"".join(doc.save_to_bytes())
+    return {
+        "truncated": raw[: len(raw) // 2],
+        "header only": raw[:12],
+        "empty": b"",
+        "garbage": b"glTF\x02\x00\x00\x00" + bytes(range(256)),
+        "not json": b"{ this is not json",
+        "bad accessor": bad_accessor,
+        "no asset": b'{"meshes": []}',
+    }
+
+
+@pytest.mark.parametrize("variant", ["truncated", "header only", "empty", "garbage", "not json",
+                                     "bad accessor", "no asset"])
+def test_corrupt_file_is_a_user_error(glb: Path, tmp_path: Path, variant: str) -> None:
+    bad = tmp_path / "bad.glb"
+    bad.write_bytes(_corrupt_variants(glb)[variant])
+    (tmp_path / "job.toml").write_text('[camera]\n[scene]\nfile = "bad.glb"\n')
+    with pytest.raises(UserError) as err:
+        scene.build_scene(job.load_job(tmp_path / "job.toml"))
+    assert err.value.key == "scene.file"
+    assert str(tmp_path / "job.toml") in str(err.value)
+    assert "bad.glb" in str(err.value)
+
+
+def test_corrupt_file_caught_while_loading_the_job(glb: Path, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.glb"
+    bad.write_bytes(glb.read_bytes()[:40])
+    (tmp_path / "job.toml").write_text('[scene]\nfile = "bad.glb"\n')  # no [camera]: peeks
+    with pytest.raises(UserError) as err:
+        job.load_job(tmp_path / "job.toml")
+    assert err.value.key == "scene.file"

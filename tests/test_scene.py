@@ -1,0 +1,271 @@
+"""Shapes, mesh import, degenerate triangles and area lights in the built scene."""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relray.core import job, scene, shapes
+from relray.core.errors import UserError
+
+
+def tri_areas(t: np.ndarray) -> np.ndarray:
+    t = np.asarray(t, np.float64)
+    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+
+
+def build(tmp_path: Path, text: str) -> scene.Scene:
+    (tmp_path / "job.toml").write_text('[[materials]]\nname = "m"\n' + text)
+    return scene.build_scene(job.load_job(tmp_path / "job.toml"))
+
+
+# ------------------------------------------------------------------------ spheres
+
+
+@pytest.mark.parametrize("subdivisions", range(7))
+def test_sphere_area_within_the_derived_bound(subdivisions: int) -> None:
+    center, r = np.array([0.3, -1.0, 2.0]), 0.7
+    tris, _ = shapes.sphere(center, r, subdivisions)
+    assert len(tris) == 20 * 4**subdivisions
+    area = tri_areas(tris).sum()
+    normals = shapes.face_normals(tris)
+    h_min = np.abs(np.einsum("ij,ij->i", tris[:, 0] - center, normals)).min()
+    exact = 4 * math.pi * r * r
+    # central projection of a face at plane distance h: dA_sphere/dA_face in [h/r, r²/h²]
+    assert (h_min / r) ** 2 * exact <= area <= exact
+    if subdivisions == 5:
+        assert 1 - area / exact == pytest.approx(3.0e-4, rel=0.05)
+
+
+def test_sphere_deficit_quarters_per_subdivision() -> None:
+    deficits = [1 - tri_areas(shapes.sphere(np.zeros(3), 1.0, s)[0]).sum() / (4 * math.pi)
+                for s in range(2, 7)]
+    ratios = np.array(deficits[:-1]) / np.array(deficits[1:])
+    np.testing.assert_allclose(ratios, 4.0, rtol=0.02)
+
+
+def test_sphere_normals_unit_radial_and_winding_outward() -> None:
+    center, r = np.array([1.0, 2.0, 3.0]), 2.5
+    tris, normals = shapes.sphere(center, r, 3)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=2), 1.0, atol=1e-12)
+    np.testing.assert_allclose(normals, (tris - center) / r, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(tris - center, axis=2), r, atol=1e-12)
+    outward = np.einsum("ij,ij->i", shapes.face_normals(tris), tris.mean(axis=1) - center)
+    assert np.all(outward > 0)
+
+
+def test_sphere_object_in_scene(tmp_path: Path) -> None:
+    s = build(tmp_path, '[[objects]]\nshape = "sphere"\ncenter = [0, 0, 1]\nradius = 0.5\n'
+                        'subdivisions = 2\nmaterial = "m"\n')
+    assert s.triangles.dtype == np.float32 and s.triangles.shape == (320, 3, 3)
+    assert s.normals is not None and s.normals.dtype == np.float32
+    assert s.material_ids.dtype == np.int32
+    lo, hi = s.bounds()
+    assert np.all(lo >= [-0.5, -0.5, 0.5 - 1e-6]) and np.all(hi <= [0.5, 0.5, 1.5 + 1e-6])
+
+
+# -------------------------------------------------------------------- box and quad
+
+
+def test_box_twelve_outward_triangles_and_bounds() -> None:
+    center, size = np.array([1.0, 2.0, 3.0]), np.array([0.4, 0.6, 1.2])
+    tris = shapes.box(center, size)
+    assert tris.shape == (12, 3, 3)
+    pts = tris.reshape(-1, 3)
+    np.testing.assert_allclose(pts.min(0), center - size / 2)
+    np.testing.assert_allclose(pts.max(0), center + size / 2)
+    assert tri_areas(tris).sum() == pytest.approx(2 * (0.4 * 0.6 + 0.6 * 1.2 + 0.4 * 1.2))
+    outward = np.einsum("ij,ij->i", shapes.face_normals(tris), tris.mean(axis=1) - center)
+    assert np.all(outward > 0)
+
+
+def test_rotated_box_bounds() -> None:
+    size, angle = np.array([2.0, 1.0, 1.0]), 30.0
+    pts = shapes.box(np.zeros(3), size, angle).reshape(-1, 3)
+    c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
+    half = np.array([size[0] * c + size[1] * s, size[0] * s + size[1] * c, size[2]]) / 2
+    np.testing.assert_allclose(pts.max(0), half)
+    np.testing.assert_allclose(pts.min(0), -half)
+
+
+def test_box_scalar_size_in_scene(tmp_path: Path) -> None:
+    s = build(tmp_path, '[[objects]]\nshape = "box"\ncenter = [0, 0, 0.5]\nsize = 1\n'
+                        'rotation_z = 90\nmaterial = "m"\n')
+    assert s.triangles.shape == (12, 3, 3) and s.normals is None
+    lo, hi = s.bounds()
+    np.testing.assert_allclose(lo, [-0.5, -0.5, 0.0], atol=1e-6)
+    np.testing.assert_allclose(hi, [0.5, 0.5, 1.0], atol=1e-6)
+
+
+def test_quad() -> None:
+    corners = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], float)
+    tris = shapes.quad(corners)
+    assert tris.shape == (2, 3, 3)
+    assert tri_areas(tris).sum() == pytest.approx(2.0)
+    np.testing.assert_allclose(shapes.face_normals(tris), [[0, 0, 1], [0, 0, 1]])
+    assert shapes.quad_problem(corners) is None
+
+
+@pytest.mark.parametrize(
+    ("corners", "word"),
+    [
+        ([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], "degenerate"),
+        ([[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]], "degenerate"),
+        ([[0, 0, 0], [1, 0, 0], [1, 1, 0.1], [0, 1, 0]], "plane"),
+        ([[0, 0, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0]], "convex"),  # bow tie
+        ([[0, 0, 0], [2, 0, 0], [0.5, 0.5, 0], [0, 2, 0]], "convex"),  # dart
+    ],
+)
+def test_quad_problems(corners: list, word: str) -> None:
+    assert word in shapes.quad_problem(np.array(corners, float))
+
+
+# ------------------------------------------------------------------------- meshes
+
+OBJ = """# a unit square as one quad face, plus a triangle
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+f 1 2 3 4
+f 1 2 5
+"""
+
+
+def test_mesh_from_obj_with_transform(tmp_path: Path) -> None:
+    (tmp_path / "m.obj").write_text(OBJ)
+    s = build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "m.obj"\ntranslate = [1, 2, 3]\n'
+                        'scale = [2, 3, 4]\nrotation_z = 90\nmaterial = "m"\n')
+    assert s.triangles.shape == (3, 3, 3) and s.normals is None
+    # v -> Rz(90) (scale * v) + t: (x, y, z) -> (-3y, 2x, 4z) + (1, 2, 3)
+    src = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]], float)
+    want = np.stack([-3 * src[:, 1], 2 * src[:, 0], 4 * src[:, 2]], axis=1) + [1, 2, 3]
+    got = np.unique(s.triangles.reshape(-1, 3).round(6), axis=0)
+    np.testing.assert_allclose(got, np.unique(want.round(6), axis=0), atol=1e-6)
+    assert tri_areas(s.triangles).sum() == pytest.approx(6.0 + 0.5 * 2 * 4)
+
+
+def test_mesh_y_up_and_smooth_normals(tmp_path: Path) -> None:
+    (tmp_path / "m.obj").write_text(OBJ)
+    s = build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "m.obj"\nup = "y"\nsmooth = true\n'
+                        'material = "m"\n')
+    # y-up file: its (x, y, z) is relray's (x, -z, y); the square (z = 0) lies in y = 0
+    assert np.all(s.triangles[:2, :, 1] == 0)
+    assert s.normals is not None
+    np.testing.assert_allclose(np.linalg.norm(s.normals, axis=2), 1.0, atol=1e-6)
+
+
+@pytest.mark.parametrize("suffix", ["ply", "stl"])
+def test_mesh_formats_through_trimesh(tmp_path: Path, suffix: str) -> None:
+    import trimesh
+
+    trimesh.creation.box(extents=[1, 2, 3]).export(str(tmp_path / f"b.{suffix}"))
+    s = build(tmp_path, f'[[objects]]\nshape = "mesh"\nfile = "b.{suffix}"\nmaterial = "m"\n')
+    assert s.triangles.shape == (12, 3, 3)
+    np.testing.assert_allclose(s.bounds()[1], [0.5, 1.0, 1.5], atol=1e-6)
+
+
+def test_corrupt_mesh_is_a_user_error(tmp_path: Path) -> None:
+    (tmp_path / "bad.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 99"
+                                       b"\nend_header\n\x00\x01")
+    with pytest.raises(UserError) as err:
+        build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "bad.ply"\nmaterial = "m"\n')
+    assert err.value.key == "objects[0].file"
+    assert str(tmp_path / "job.toml") in str(err.value)
+
+
+def test_degenerate_triangles_dropped_with_a_count(tmp_path: Path, caplog) -> None:
+    (tmp_path / "d.obj").write_text(
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv nan 0 0\n"
+        "f 1 2 3\n"  # fine
+        "f 1 2 4\n"  # collinear: zero area
+        "f 1 1 3\n"  # repeated vertex
+        "f 5 2 3\n"  # non-finite vertex
+    )
+    with caplog.at_level(logging.WARNING, logger="relray"):
+        s = build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "d.obj"\nmaterial = "m"\n')
+    assert s.triangles.shape == (1, 3, 3)
+    assert s.dropped_degenerate == 3
+    assert len(s.material_ids) == 1
+    assert "dropped 3 degenerate" in caplog.text
+
+
+def test_all_degenerate_is_a_user_error(tmp_path: Path) -> None:
+    (tmp_path / "d.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    with pytest.raises(UserError, match="no triangles"):
+        build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "d.obj"\nmaterial = "m"\n')
+
+
+# -------------------------------------------------------------------------- lights
+
+AREA = """[[objects]]
+shape = "box"
+center = [0, 0, 0]
+size = 1
+material = "m"
+[[lights]]
+type = "area"
+name = "panel"
+position = [0.0, 0.0, 1.9]
+direction = [0.0, 0.0, -1.0]
+size = [0.5, 0.4]
+power = 40.0
+color = [1.0, 0.8, 0.6]
+[[lights]]
+type = "point"
+position = [0.0, 0.0, 1.0]
+power = 100.0
+"""
+
+
+def test_area_light_becomes_emissive_quad(tmp_path: Path) -> None:
+    s = build(tmp_path, AREA)
+    assert [light.type for light in s.lights] == ["point"]
+    quad = s.triangles[s.material_ids == 1]
+    assert quad.shape == (2, 3, 3)
+    m = s.materials[1]
+    area = 0.5 * 0.4
+    assert m.emission_strength == pytest.approx(40.0 / (math.pi * area))  # L = P / (pi A)
+    assert m.emission == pytest.approx((1.0, 0.8, 0.6))
+    assert m.one_sided_emission and m.base_color == (0.0, 0.0, 0.0)
+    assert tri_areas(quad).sum() == pytest.approx(area, rel=1e-6)
+    np.testing.assert_allclose(shapes.face_normals(quad), [[0, 0, -1]] * 2, atol=1e-7)
+    np.testing.assert_allclose(quad.reshape(-1, 3).mean(0)[2], 1.9, atol=1e-6)
+    extent = quad.reshape(-1, 3).max(0) - quad.reshape(-1, 3).min(0)
+    np.testing.assert_allclose(extent, [0.5, 0.4, 0.0], atol=1e-6)  # width along x
+
+
+def test_area_light_emits_its_power() -> None:
+    """P = pi A L for a one-sided Lambertian emitter, for any direction."""
+    light = job.LightSpec(type="area", position=np.zeros(3),
+                          direction=np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]),
+                          power=7.0, size=(0.3, 2.0))
+    quad = shapes.area_light_quad(light.position, light.direction, light.size)
+    L = scene.area_light_material(light, 0).emission_strength
+    assert math.pi * tri_areas(quad).sum() * L == pytest.approx(7.0)
+    np.testing.assert_allclose(shapes.face_normals(quad), [light.direction] * 2, atol=1e-12)
+
+
+@pytest.mark.parametrize("direction", [[0, 0, 1], [0, 0, -1], [1, 0, 0], [0.2, 0.3, -0.9]])
+def test_light_frame_is_a_rotation_with_minus_z_along_direction(direction: list) -> None:
+    d = np.array(direction, float) / np.linalg.norm(direction)
+    R = shapes.frame_towards(d)
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+    np.testing.assert_allclose(-R[:, 2], d, atol=1e-12)
+
+
+def test_cornell_preset_scene() -> None:
+    root = Path(__file__).resolve().parents[1]
+    s = scene.build_scene(job.load_job(root / "presets" / "cornell.toml"))
+    assert s.triangles.shape == (6 * 2 + 2 * 12, 3, 3)
+    np.testing.assert_allclose(s.bounds()[0], [-1, -1, 0])
+    np.testing.assert_allclose(s.bounds()[1], [1, 1, 2])
+    light = [m.name for m in s.materials].index("light")
+    assert np.count_nonzero(s.material_ids == light) == 2
+    assert s.dropped_degenerate == 0 and s.camera is None
