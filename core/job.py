@@ -177,6 +177,7 @@ class MotionSettings:
     ct_per_frame: float = 0.0
     keyframes: tuple[tuple[int, np.ndarray], ...] = ()
     proper_acceleration: np.ndarray | None = None
+    render_frames: tuple[int, int] | None = None  # --frames: a sub-range to render
 
 
 @dataclass(frozen=True)
@@ -1179,7 +1180,9 @@ def with_overrides(
 
     Errors name the option (``--beta``). ``--beta`` replaces the keyframes by a
     constant beta. ``--out`` is relative to the current directory, as any command-line
-    path. ``--frames`` is [first, last].
+    path. ``--frames`` is [first, last], a sub-range of ``motion.frames`` to render: the
+    worldline and the ct of every frame stay those of the whole animation, so a farm
+    chunk renders exactly the frames a single run would.
     """
     ctx = _Ctx(job.path)
     render, motion, output = job.render, job.motion, job.output
@@ -1196,8 +1199,12 @@ def with_overrides(
     if ct is not None:
         motion = replace(motion, ct=_number(ct, ctx, "--ct"))
     if frames is not None:
-        motion = replace(motion, frames=_parse_frames(frames, ctx, "--frames"))
-        _check_name_template(output.name, motion.frames, ctx, "--frames")
+        sub = _parse_frames(frames, ctx, "--frames")
+        first, last = motion.frames
+        if sub[0] < first or sub[1] > last:
+            raise ctx.error("--frames", f"{sub[0]}-{sub[1]} lies outside the animation's "
+                                        f"frames {first}-{last} (motion.frames)")
+        motion = replace(motion, render_frames=sub)
     if out is not None:
         if not isinstance(out, str | Path) or not str(out).strip():
             raise ctx.error("--out", "must be a directory name")
@@ -1206,8 +1213,8 @@ def with_overrides(
 
 
 def frame_list(job: Job) -> list[int]:
-    """The frames to render, first to last inclusive."""
-    first, last = job.motion.frames
+    """The frames to render, first to last inclusive (``--frames`` or motion.frames)."""
+    first, last = job.motion.render_frames or job.motion.frames
     return list(range(first, last + 1))
 
 

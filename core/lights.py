@@ -1,8 +1,8 @@
 """Light sources for next-event estimation: emissive triangles, point, spot, sun, sky.
 
 One table lists every light that exists in the scene (and nothing else: NEE is never
-spent on lights a scene lacks).  A light is chosen with probability proportional to a
-power estimate, then a point or direction on it is sampled:
+spent on lights a scene lacks).  A light is chosen with a probability that mixes a power
+estimate with a uniform share (:func:`selection_pmf`), then a point or direction on it is sampled:
 
 | kind | sample | pdf (solid angle at the shading point x) | radiance term |
 |---|---|---|---|
@@ -28,6 +28,7 @@ from . import spectrum
 from .materials import SpectralTables, light_spectrum
 
 TRIANGLE, POINT, SPOT, SUN, SKY = 0, 1, 2, 3, 4
+UNIFORM_SHARE = 0.5
 
 
 @dataclass
@@ -96,8 +97,7 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
         est = row_luminance(tables.emit[sky_row], mode) * 4.0 * math.pi**2 * radius**2
         kinds.append(SKY), prims.append(-1), pos.append((0, 0, 0)), dirs.append((0, 0, 1))
         rows.append(sky_row), scales.append(1.0), spots.append((0, 0)), power.append(est)
-    power = np.asarray(power, np.float64)
-    pmf = power / power.sum() if len(power) else power
+    pmf = selection_pmf(np.asarray(power, np.float64))
     cdf = np.concatenate([[0.0], np.cumsum(pmf)])
     if len(cdf) > 1:
         cdf[-1] = 1.0
@@ -110,6 +110,19 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
                       np.asarray(dirs, np.float32).reshape(-1, 3), np.asarray(rows, np.int32),
                       np.asarray(scales, np.float32), np.asarray(spots, np.float32).reshape(-1, 2),
                       cdf, tri_pmf, sky_pmf, sky_row)
+
+
+def selection_pmf(power: np.ndarray, uniform_share: float = UNIFORM_SHARE) -> np.ndarray:
+    """Light-selection probabilities: power-proportional, mixed with a uniform share.
+
+    p_k = (1 - u) P_k / ΣP + u / K.  Pure power sampling starves small, close lights next
+    to a bright sky (the sky's power estimate is huge but a point inside a box cannot see
+    it), which turns their light into BSDF-sampled fireflies; the uniform share bounds
+    every light's probability from below.
+    """
+    if len(power) == 0:
+        return power
+    return (1.0 - uniform_share) * power / power.sum() + uniform_share / len(power)
 
 
 @njit(cache=True, nogil=True, inline="always")
