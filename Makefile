@@ -31,7 +31,7 @@ lint: $(STAMP)
 
 ## make gallery: the seed report's figures, rendered into docs/gallery
 gallery: $(STAMP)
-	$(BIN)/python tools/gallery.py
+	$(BIN)/python docs/gallery.py
 
 clean:
 	rm -rf out .cache .pytest_cache

@@ -20,6 +20,17 @@ def read_png(path: Path) -> np.ndarray:
     return buf.get_pixels(oiio.UINT8)
 
 
+def caption(image: np.ndarray, text: str) -> np.ndarray:
+    """``image`` (uint8 h, w, 3) with ``text`` written in its top-left corner."""
+    h, w, c = image.shape
+    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, c, oiio.UINT8))
+    buf.set_pixels(oiio.ROI(0, w, 0, h, 0, 1, 0, c), np.ascontiguousarray(image))
+    size = max(10, h // 16)
+    oiio.ImageBufAlgo.render_text(buf, 4 + 1, size + 4 + 1, text, size, "", (0, 0, 0))
+    oiio.ImageBufAlgo.render_text(buf, 4, size + 4, text, size, "", (1, 1, 1))
+    return buf.get_pixels(oiio.UINT8)
+
+
 def tile(images: list[np.ndarray], columns: int, gap: int = 2) -> np.ndarray:
     """Images of one size laid out row-major on a black canvas with ``gap`` pixels between."""
     h, w, c = images[0].shape
@@ -33,9 +44,12 @@ def tile(images: list[np.ndarray], columns: int, gap: int = 2) -> np.ndarray:
     return sheet
 
 
-def write_contact_sheet(frames: list[Path], out: Path, columns: int = 8) -> Path:
-    """Tile ``frames`` (PNG) into ``out`` (PNG), written atomically."""
+def write_contact_sheet(frames: list[Path], out: Path, columns: int = 8,
+                        captions: list[str] | None = None) -> Path:
+    """Tile ``frames`` (PNG) into ``out`` (PNG), written atomically, optionally captioned."""
     images = [read_png(p)[..., :3] for p in frames]
+    if captions is not None:
+        images = [caption(im, text) for im, text in zip(images, captions, strict=True)]
     shapes = {im.shape for im in images}
     if len(shapes) != 1:
         raise UserError(f"frames differ in size: {sorted(shapes)}", file=frames[0].parent)

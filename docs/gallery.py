@@ -1,0 +1,76 @@
+"""Render the README's gallery: the seed report's figures and the fly-by contact sheet.
+
+    .venv/bin/python docs/gallery.py [--spp N]
+
+Renders every job in presets/seed_figures/ (into out/seed_figures/) and writes
+docs/gallery/seed_figures.png, a captioned contact sheet.  Then it renders the Doppler
+figures 2-3 ... 2-18 again with relray's physics (CIE 1931 sensor, Jakob-Hanika spectra,
+Doppler and the D^5 searchlight) into docs/gallery/seed_figures_physical.png, and writes
+docs/gallery/flyby.png from out/flyby/ when `make demo` has rendered it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+from pathlib import Path
+
+from relray.core import job as jobmod
+from relray.core.contact import write_contact_sheet
+from relray.core.render import render_job
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def figure_key(path: Path) -> tuple[int, int]:
+    """fig2-13.toml -> (2, 13), for the seed's order."""
+    a, b = re.match(r"fig(\d+)-(\d+)", path.stem).groups()
+    return int(a), int(b)
+
+
+def caption(job: jobmod.Job) -> str:
+    b = job.motion.beta
+    beta = ",".join(f"{x:g}" for x in b)
+    return f"{job.path.stem}  ct={job.motion.ct:g}  b=({beta})  {job.render.spectral}"
+
+
+def physical_job(job: jobmod.Job) -> jobmod.Job:
+    """The same figure with relray's spectral model, Doppler and searchlight."""
+    render = dataclasses.replace(job.render, spectral="cie1931", doppler=True,
+                                 searchlight=True)
+    output = dataclasses.replace(job.output, dir=ROOT / "out" / "seed_figures_physical")
+    return dataclasses.replace(job, render=render, output=output)
+
+
+def sheet(jobs: list[Path], spp: int | None, name: str, physical: bool) -> None:
+    """Render ``jobs`` and tile their PNGs into docs/gallery/NAME.png."""
+    pngs, captions = [], []
+    for path in jobs:
+        job = jobmod.with_overrides(jobmod.load_job(path), spp=spp)
+        if physical:
+            job = physical_job(job)
+        render_job(job, overwrite=True, show_progress=False)
+        pngs.append(job.output.dir / f"{job.output.name.format(frame=1)}.png")
+        captions.append(caption(job))
+        print(pngs[-1])
+    print(write_contact_sheet(pngs, ROOT / "docs" / "gallery" / f"{name}.png", columns=6,
+                              captions=captions))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--spp", type=int, default=None)
+    args = ap.parse_args()
+    jobs = sorted((ROOT / "presets" / "seed_figures").glob("fig*.toml"), key=figure_key)
+    sheet(jobs, args.spp, "seed_figures", physical=False)
+    doppler_figs = [p for p in jobs if figure_key(p)[0] == 2 and figure_key(p)[1] >= 3]
+    sheet(doppler_figs, args.spp, "seed_figures_physical", physical=True)
+    flyby = sorted((ROOT / "out" / "flyby").glob("frame_*.png"))
+    if flyby:
+        print(write_contact_sheet(flyby[::3], ROOT / "docs" / "gallery" / "flyby.png",
+                                  columns=4, captions=[p.stem for p in flyby[::3]]))
+
+
+if __name__ == "__main__":
+    main()
