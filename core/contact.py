@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
 
 from .errors import UserError
+from .imageio import atomic_write, write_pixels
 
 
 def read_png(path: Path) -> np.ndarray:
@@ -55,15 +54,6 @@ def write_contact_sheet(frames: list[Path], out: Path, columns: int = 8,
         raise UserError(f"frames differ in size: {sorted(shapes)}", file=frames[0].parent)
     sheet = tile(images, columns)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out.stem}.tmp-", suffix=".png", dir=out.parent)
-    os.close(fd)
-    try:
-        spec = oiio.ImageSpec(sheet.shape[1], sheet.shape[0], sheet.shape[2], oiio.UINT8)
-        o = oiio.ImageOutput.create(tmp)
-        if o is None or not o.open(tmp, spec) or not o.write_image(sheet) or not o.close():
-            raise UserError(f"cannot write {out}: {oiio.geterror()}", file=out)
-        os.replace(tmp, out)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    spec = oiio.ImageSpec(sheet.shape[1], sheet.shape[0], sheet.shape[2], oiio.UINT8)
+    atomic_write(out, lambda tmp: write_pixels(tmp, out, sheet, spec))
     return out

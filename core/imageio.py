@@ -217,7 +217,7 @@ def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
     _fsync_path(path.parent, directory=True)
 
 
-def _oiio_write(tmp: Path, final: Path, pixels: np.ndarray, spec: oiio.ImageSpec) -> None:
+def write_pixels(tmp: Path, final: Path, pixels: np.ndarray, spec: oiio.ImageSpec) -> None:
     """Write one image to ``tmp`` with OpenImageIO (format from the extension)."""
     out = oiio.ImageOutput.create(str(tmp))
     if out is None:
@@ -255,7 +255,7 @@ def _write_image(
     spec.alpha_channel = alpha_channel
     _set_metadata(spec, attributes)
     data = np.ascontiguousarray(pixels)
-    atomic_write(path, lambda tmp: _oiio_write(tmp, path, data, spec))
+    atomic_write(path, lambda tmp: write_pixels(tmp, path, data, spec))
 
 
 def _check_plane(name: str, a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
