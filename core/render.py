@@ -206,7 +206,7 @@ class FrameRenderer:
     def _enter_scene(self, x_lab: np.ndarray, d_lab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Origins in accelerator coordinates, advanced (float64) to the bounding sphere."""
         o = np.asarray(x_lab, np.float64) - self.prep.accel.origin
-        b = d_lab @ o
+        b = d_lab[:, 0] * o[0] + d_lab[:, 1] * o[1] + d_lab[:, 2] * o[2]
         c = float(o @ o) - self.prep.radius**2
         disc = b * b - c
         t_in = np.where((c > 0) & (disc > 0), -b - np.sqrt(np.maximum(disc, 0.0)), 0.0)
