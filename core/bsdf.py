@@ -36,7 +36,7 @@ from .sampling import INV_PI, onb, to_world
 DELTA_ALPHA = 1e-3
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ggx_d(cos_h, a2):
     """Trowbridge–Reitz normal distribution D(h)."""
     c2 = cos_h * cos_h
@@ -44,7 +44,7 @@ def ggx_d(cos_h, a2):
     return a2 / (math.pi * t * t)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ggx_lambda(cos_t, a2):
     """Smith Λ(ω) for GGX."""
     c2 = cos_t * cos_t
@@ -54,7 +54,7 @@ def ggx_lambda(cos_t, a2):
     return 0.5 * (math.sqrt(1.0 + a2 * tan2) - 1.0)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ggx_eval(cos_o, cos_i, cos_h, a2):
     """The conductor lobe without Fresnel and its pdf: (D G2 / (4 cos_o cos_i), pdf)."""
     if cos_o <= 0.0 or cos_i <= 0.0 or cos_h <= 0.0:
@@ -67,7 +67,7 @@ def ggx_eval(cos_o, cos_i, cos_h, a2):
     return f, pdf
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def ggx_sample_h(wo, n, alpha, u1, u2):
     """A microfacet normal h (world) drawn from the visible normals of wo (Heitz 2018)."""
     t, b = onb(n[0], n[1], n[2])
@@ -101,7 +101,7 @@ def ggx_sample_h(wo, n, alpha, u1, u2):
     return to_world(hx * inv, hy * inv, hz * inv, t, b, n[0], n[1], n[2])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def schlick_weight(cos_d):
     """(1 - cos)⁵ of Schlick's Fresnel: F = F0 + (1 - F0)·weight."""
     m = min(1.0, max(0.0, 1.0 - cos_d))
@@ -109,7 +109,7 @@ def schlick_weight(cos_d):
     return m2 * m2 * m
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def fresnel_dielectric(cos_i, eta):
     """Unpolarised Fresnel reflectance and cos θ_t for relative IOR eta = n_t / n_i."""
     sin2_t = max(0.0, 1.0 - cos_i * cos_i) / (eta * eta)
@@ -121,7 +121,7 @@ def fresnel_dielectric(cos_i, eta):
     return 0.5 * (rs * rs + rp * rp), cos_t
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def principled_eval(wo, wi, n, wd, wm, a2, sel_d, sel_m):
     """Non-delta part of the material: (k_d, k_m, s, pdf) for the lane formula above.
 

@@ -110,7 +110,7 @@ def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np
             "ng": ng.astype(f), "area": (0.5 * norm).astype(f)}
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def lookup(table, row, u):
     """Linear interpolation of table[row] at fractional column u (clamped)."""
     g = table.shape[1]
@@ -123,7 +123,7 @@ def lookup(table, row, u):
     return table[row, i] * (1.0 - f) + table[row, i + 1] * f
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, lamu,
           prev_pdf, prev_delta, nlanes, new_o, new_d, alive, sh_o, sh_d, sh_t, sh_c, has_sh):
     """One bounce for every live path ``i`` (path index ``idx[i]``).
@@ -206,6 +206,8 @@ def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, la
             delta = True
             scale = sc.l_scale[k]
             ok = True
+            finite = False
+            tx = ty = tz = 0.0
             if kind == TRIANGLE:
                 lt = sc.l_prim[k]
                 s1, s2 = uniform_triangle(u1, u2)
@@ -217,19 +219,24 @@ def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, la
                 cos_l = -(sc.ng[lt, 0] * wix + sc.ng[lt, 1] * wiy + sc.ng[lt, 2] * wiz)
                 if sc.mat_one_sided[sc.tri_mat[lt]] == 1 and cos_l <= 0.0:
                     ok = False
+                # the shadow ray aims at the light point lifted off the light towards x
+                lift = eps if cos_l > 0.0 else -eps
+                tx = px + qx + sc.ng[lt, 0] * lift
+                ty = py + qy + sc.ng[lt, 1] * lift
+                tz = pz + qz + sc.ng[lt, 2] * lift
                 cos_l = abs(cos_l)
                 p_l = p_sel * dist * dist / (sc.area[lt] * cos_l + 1e-30)
                 delta = False
-                tmax = dist * (1.0 - 1e-4) - eps
+                finite = True
             elif kind == SKY:
                 wix, wiy, wiz = uniform_sphere(u1, u2)
                 p_l = p_sel / (4.0 * math.pi)
                 delta = False
-                tmax = 1e30
+                finite = False
             elif kind == SUN:
                 wix, wiy, wiz = -sc.l_dir[k, 0], -sc.l_dir[k, 1], -sc.l_dir[k, 2]
                 p_l = p_sel
-                tmax = 1e30
+                finite = False
             else:
                 qx, qy, qz = sc.l_pos[k, 0] - px, sc.l_pos[k, 1] - py, sc.l_pos[k, 2] - pz
                 dist = math.sqrt(qx * qx + qy * qy + qz * qz) + 1e-30
@@ -239,7 +246,8 @@ def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, la
                     cos_a = -(sc.l_dir[k, 0] * wix + sc.l_dir[k, 1] * wiy + sc.l_dir[k, 2] * wiz)
                     scale *= spot_mask(cos_a, sc.l_spot[k, 0], sc.l_spot[k, 1])
                 p_l = p_sel
-                tmax = dist * (1.0 - 1e-4) - eps
+                tx, ty, tz = sc.l_pos[k, 0], sc.l_pos[k, 1], sc.l_pos[k, 2]
+                finite = True
             wi = (wix, wiy, wiz)
             if ok and p_l > 0.0 and scale > 0.0 and (wix * gx + wiy * gy + wiz * gz) > 0.0:
                 kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, sel_d, sel_m)
@@ -252,11 +260,17 @@ def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, la
                         rho = lookup(sc.refl, m, lamu[pi, j])
                         f = kd * rho + km * (rho + (1.0 - rho) * s)
                         sh_c[i, j] = thr[pi, j] * f * c * lookup(sc.emit, row, lamu[pi, j])
-                    sh_o[i, 0] = px + gx * eps
-                    sh_o[i, 1] = py + gy * eps
-                    sh_o[i, 2] = pz + gz * eps
-                    sh_d[i, 0], sh_d[i, 1], sh_d[i, 2] = wix, wiy, wiz
-                    sh_t[i] = tmax
+                    ox, oy, oz = px + gx * eps, py + gy * eps, pz + gz * eps
+                    sh_o[i, 0], sh_o[i, 1], sh_o[i, 2] = ox, oy, oz
+                    if finite:
+                        # direction and length from the lifted origin to the target
+                        sx, sy, sz = tx - ox, ty - oy, tz - oz
+                        sl = math.sqrt(sx * sx + sy * sy + sz * sz)
+                        sh_d[i, 0], sh_d[i, 1], sh_d[i, 2] = sx / sl, sy / sl, sz / sl
+                        sh_t[i] = sl * (1.0 - 1e-4)
+                    else:
+                        sh_d[i, 0], sh_d[i, 1], sh_d[i, 2] = wix, wiy, wiz
+                        sh_t[i] = 1e30
                     has_sh[i] = 1
         # continue the path: pick a lobe
         ul = rand(key, base + 3)
@@ -334,7 +348,7 @@ def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, la
         alive[i] = 1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def add_shadows(idx, has_sh, blocked, sh_c, L, nlanes):
     """Add the unoccluded next-event contributions to their paths."""
     k = 0
@@ -346,7 +360,7 @@ def add_shadows(idx, has_sh, blocked, sh_c, L, nlanes):
             k += 1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def sensor_values(L, lam, pdf, w_d, response, rgb_mode, out, lam_weight):
     """Per-path sensor values s_c = w_D Σ_j c̄(λ_j) L_j / (4 p_j) (see module docstring)."""
     n = L.shape[0]

@@ -63,10 +63,11 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
     mode = tables.mode
     kinds, prims, pos, dirs, rows, scales, spots, power = [], [], [], [], [], [], [], []
     emit_rows = tables.mat_emit_row[scene.material_ids]
+    lum = {r: row_luminance(tables.emit[r], mode) for r in np.unique(emit_rows[emit_rows >= 0])}
     for t in np.flatnonzero(emit_rows >= 0):
         m = scene.material_ids[t]
         sides = 1.0 if tables.mat_one_sided[m] else 2.0
-        p = area[t] * math.pi * sides * row_luminance(tables.emit[emit_rows[t]], mode)
+        p = area[t] * math.pi * sides * lum[emit_rows[t]]
         if p <= 0.0:
             continue
         kinds.append(TRIANGLE), prims.append(t), pos.append((0, 0, 0)), dirs.append((0, 0, 1))
@@ -125,7 +126,7 @@ def selection_pmf(power: np.ndarray, uniform_share: float = UNIFORM_SHARE) -> np
     return (1.0 - uniform_share) * power / power.sum() + uniform_share / len(power)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def select(cdf, u):
     """Index k with cdf[k] <= u < cdf[k+1], and its probability."""
     k = np.searchsorted(cdf, u, side="right") - 1
@@ -133,7 +134,7 @@ def select(cdf, u):
     return k, cdf[k + 1] - cdf[k]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def spot_mask(cos_a, cos_half, smooth):
     """Blender's spot cone: smoothstep((cos a - cos(size/2)) / smooth)."""
     if cos_a <= cos_half:

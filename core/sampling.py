@@ -29,7 +29,7 @@ _INV24 = np.float32(1.0 / 16777216.0)
 INV_PI = np.float32(1.0 / math.pi)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def mix64(z):
     """SplitMix64 finaliser: a bijective avalanche hash of a uint64."""
     z = (z ^ (z >> _S30)) * _M1
@@ -37,7 +37,7 @@ def mix64(z):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def path_key(seed, frame, pixel, sample):
     """The RNG key of one path: hash of (seed, frame, pixel, sample)."""
     k = mix64(np.uint64(seed) * _GOLDEN + np.uint64(frame))
@@ -45,7 +45,7 @@ def path_key(seed, frame, pixel, sample):
     return mix64(k ^ (np.uint64(sample) * _M2))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def path_keys(seed, frame, pixels, samples):
     """Vector form of :func:`path_key` for a wavefront."""
     out = np.empty(len(pixels), np.uint64)
@@ -54,14 +54,14 @@ def path_keys(seed, frame, pixels, samples):
     return out
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def rand(key, dim):
     """Uniform float32 in [0, 1) for dimension ``dim`` of the path with ``key``."""
     x = mix64(key + np.uint64(dim + 1) * _GOLDEN)
     return np.float32(x >> _S40) * _INV24
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def rand_dims(keys, dim):
     """rand(key, dim) for every key of a wavefront (float64)."""
     out = np.empty(len(keys), np.float64)
@@ -70,7 +70,7 @@ def rand_dims(keys, dim):
     return out
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def onb(nx, ny, nz):
     """An orthonormal basis (t, b) perpendicular to unit n (Duff et al. 2017)."""
     s = 1.0 if nz >= 0.0 else -1.0
@@ -79,7 +79,7 @@ def onb(nx, ny, nz):
     return (1.0 + s * nx * nx * a, s * b, -s * nx), (b, s + ny * ny * a, -ny)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def cosine_hemisphere(u1, u2):
     """Local direction (x, y, z) with z ≥ 0 and pdf cos θ / π."""
     r = math.sqrt(u1)
@@ -87,7 +87,7 @@ def cosine_hemisphere(u1, u2):
     return r * math.cos(phi), r * math.sin(phi), math.sqrt(max(0.0, 1.0 - u1))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def uniform_sphere(u1, u2):
     """Unit direction with pdf 1/(4π)."""
     z = 1.0 - 2.0 * u1
@@ -96,14 +96,14 @@ def uniform_sphere(u1, u2):
     return r * math.cos(phi), r * math.sin(phi), z
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def uniform_triangle(u1, u2):
     """Barycentrics (b1, b2) of a uniform point on a triangle (pdf 1/area)."""
     su = math.sqrt(u1)
     return su * (1.0 - u2), su * u2
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def to_world(x, y, z, t, b, nx, ny, nz):
     """Local (x, y, z) in the frame (t, b, n) -> world vector."""
     return (x * t[0] + y * b[0] + z * nx,
@@ -111,7 +111,7 @@ def to_world(x, y, z, t, b, nx, ny, nz):
             x * t[2] + y * b[2] + z * nz)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def power_heuristic(pa, pb):
     """Veach's power heuristic (β = 2): pa² / (pa² + pb²)."""
     a = pa * pa

@@ -294,7 +294,7 @@ class WavelengthSampler:
         return lam, pdf
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _hero_kernel(cdf, edges, pdf, u, lam_out, pdf_out):
     """λ_j = inverse-CDF((u + j/n) mod 1) for every u; exact pdf of the bin."""
     k = pdf.shape[0]
