@@ -134,9 +134,18 @@ class FrameRenderer:
 
     def render(self, event: relativity.ShutterEvent, frame: int,
                progress: Callable[[int], None] | None = None,
-               cancel: Callable[[], bool] | None = None) -> tuple[Film, FrameStats]:
-        """Render one frame seen from ``event``; returns the film and statistics."""
+               cancel: Callable[[], bool] | None = None,
+               samples: tuple[int, int] | None = None) -> tuple[Film, FrameStats]:
+        """Render one frame seen from ``event``; returns the film and statistics.
+
+        ``samples = (s0, s1)`` renders only the pixel samples s0 ≤ s < s1 of the frame's
+        ``spp`` (a sample batch: batches of one frame merge with :meth:`Film.merge` into
+        the frame, because every random number is keyed by the sample index).
+        """
         s = self.settings
+        s_lo, s_hi = samples if samples is not None else (0, s.spp)
+        if not 0 <= s_lo < s_hi <= s.spp:
+            raise ValueError(f"sample range {samples} is not inside [0, {s.spp})")
         film = Film(s.width, s.height, aovs=self.aovs, bands=self.bands)
         stats = FrameStats()
         lock = threading.Lock()
@@ -147,10 +156,10 @@ class FrameRenderer:
             cols, rows = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1))
             pixels = (rows * s.width + cols).ravel().astype(np.int64)
             chunk = max(1, WAVEFRONT // len(pixels))
-            for s0 in range(0, s.spp, chunk):
+            for s0 in range(s_lo, s_hi, chunk):
                 if cancel is not None and cancel():
                     raise RenderCancelled
-                s1 = min(s.spp, s0 + chunk)
+                s1 = min(s_hi, s0 + chunk)
                 self._trace_chunk(event, frame, pixels, s0, s1, film, lock, stats)
                 if progress is not None:
                     progress(len(pixels) * (s1 - s0))
