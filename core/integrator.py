@@ -124,20 +124,23 @@ def lookup(table, row, u):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, lamu,
-          prev_pdf, prev_delta, nlanes, new_o, new_d, alive, sh_o, sh_d, sh_t, sh_c, has_sh):
-    """One bounce for every live path ``i`` (path index ``idx[i]``).
+def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, lamu,
+          prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d, sh_t, sh_c):
+    """One bounce for the live rays 0 ≤ i < n (ray i belongs to path ``idx[i]``).
 
     Adds emission seen by the ray (MIS-weighted against NEE), prepares one shadow ray
-    (NEE) and samples the continuation; writes ``alive[i]`` and the next ray.
+    (NEE) and samples the continuation.  The continuing rays are compacted *in place*
+    into the front of ``idx``, ``o`` and ``d`` (ray i is read before slot ≤ i is
+    written), the shadow rays into the front of the ``sh_*`` buffers.  Returns
+    (continuing rays, shadow rays).
     """
-    n = len(idx)
     base = 3 + depth * 8
+    n_alive = 0
+    n_sh = 0
+    lane_c = np.zeros(4, np.float32)
     for i in range(n):
         pi = idx[i]
         key = keys[pi]
-        alive[i] = 0
-        has_sh[i] = 0
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         tri = prim[i]
         if tri < 0:
@@ -259,19 +262,23 @@ def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, la
                     for j in range(nlanes):
                         rho = lookup(sc.refl, m, lamu[pi, j])
                         f = kd * rho + km * (rho + (1.0 - rho) * s)
-                        sh_c[i, j] = thr[pi, j] * f * c * lookup(sc.emit, row, lamu[pi, j])
+                        lane_c[j] = thr[pi, j] * f * c * lookup(sc.emit, row, lamu[pi, j])
                     ox, oy, oz = px + gx * eps, py + gy * eps, pz + gz * eps
-                    sh_o[i, 0], sh_o[i, 1], sh_o[i, 2] = ox, oy, oz
+                    k_sh = n_sh
+                    sh_idx[k_sh] = pi
+                    sh_o[k_sh, 0], sh_o[k_sh, 1], sh_o[k_sh, 2] = ox, oy, oz
                     if finite:
                         # direction and length from the lifted origin to the target
                         sx, sy, sz = tx - ox, ty - oy, tz - oz
                         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
-                        sh_d[i, 0], sh_d[i, 1], sh_d[i, 2] = sx / sl, sy / sl, sz / sl
-                        sh_t[i] = sl * (1.0 - 1e-4)
+                        sh_d[k_sh, 0], sh_d[k_sh, 1], sh_d[k_sh, 2] = sx / sl, sy / sl, sz / sl
+                        sh_t[k_sh] = sl * (1.0 - 1e-4)
                     else:
-                        sh_d[i, 0], sh_d[i, 1], sh_d[i, 2] = wix, wiy, wiz
-                        sh_t[i] = 1e30
-                    has_sh[i] = 1
+                        sh_d[k_sh, 0], sh_d[k_sh, 1], sh_d[k_sh, 2] = wix, wiy, wiz
+                        sh_t[k_sh] = 1e30
+                    for j in range(nlanes):
+                        sh_c[k_sh, j] = lane_c[j]
+                    n_sh += 1
         # continue the path: pick a lobe
         ul = rand(key, base + 3)
         u1 = rand(key, base + 4)
@@ -341,23 +348,23 @@ def shade(sc, depth, max_depth, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, la
                     continue
                 for j in range(nlanes):
                     thr[pi, j] /= q
-        new_o[i, 0] = px + gx * eps * off
-        new_o[i, 1] = py + gy * eps * off
-        new_o[i, 2] = pz + gz * eps * off
-        new_d[i, 0], new_d[i, 1], new_d[i, 2] = wix, wiy, wiz
-        alive[i] = 1
+        k_a = n_alive
+        idx[k_a] = pi
+        o[k_a, 0] = px + gx * eps * off
+        o[k_a, 1] = py + gy * eps * off
+        o[k_a, 2] = pz + gz * eps * off
+        d[k_a, 0], d[k_a, 1], d[k_a, 2] = wix, wiy, wiz
+        n_alive += 1
+    return n_alive, n_sh
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def add_shadows(idx, has_sh, blocked, sh_c, L, nlanes):
+def add_shadows(sh_idx, blocked, sh_c, L, nlanes):
     """Add the unoccluded next-event contributions to their paths."""
-    k = 0
-    for i in range(len(idx)):
-        if has_sh[i]:
-            if not blocked[k]:
-                for j in range(nlanes):
-                    L[idx[i], j] += sh_c[i, j]
-            k += 1
+    for k in range(len(sh_idx)):
+        if not blocked[k]:
+            for j in range(nlanes):
+                L[sh_idx[k], j] += sh_c[k, j]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -400,31 +407,27 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_loc
     prev_pdf = np.zeros(n, np.float32)
     prev_delta = np.ones(n, np.int32)
     idx = np.arange(n, dtype=np.int64)
+    o = np.array(o_local, np.float32, order="C")      # compacted in place by shade
+    d = np.array(d, np.float32, order="C")
+    sh_idx = np.empty(n, np.int64)
+    sh_o = np.empty((n, 3), np.float32)
+    sh_d = np.empty((n, 3), np.float32)
+    sh_t = np.empty(n, np.float32)
+    sh_c = np.empty((n, 4), np.float32)
     first_t = None
+    m = n
     for depth in range(max_depth):
-        hits = accel.intersect(o_local, d)
+        hits = accel.intersect(o[:m], d[:m])
         if depth == 0:
             first_t = hits.t
-        m = len(idx)
-        new_o = np.empty((m, 3), np.float32)
-        new_d = np.empty((m, 3), np.float32)
-        alive = np.empty(m, np.int8)
-        sh_o = np.empty((m, 3), np.float32)
-        sh_d = np.empty((m, 3), np.float32)
-        sh_t = np.empty(m, np.float32)
-        sh_c = np.empty((m, 4), np.float32)
-        has_sh = np.empty(m, np.int8)
-        shade(sc, depth, max_depth, idx, keys, o_local, d, hits.t, hits.prim, hits.u, hits.v,
-              thr, L, lamu, prev_pdf, prev_delta, nlanes, new_o, new_d, alive, sh_o, sh_d,
-              sh_t, sh_c, has_sh)
-        s = has_sh.view(bool)
-        if s.any():
-            blocked = accel.occluded(sh_o[s], sh_d[s], sh_t[s])
-            add_shadows(idx, has_sh, blocked, sh_c, L, nlanes)
-        keep = alive.view(bool)
-        if not keep.any():
+        m, ns = shade(sc, depth, max_depth, m, idx, keys, o, d, hits.t, hits.prim, hits.u,
+                      hits.v, thr, L, lamu, prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d,
+                      sh_t, sh_c)
+        if ns:
+            blocked = accel.occluded(sh_o[:ns], sh_d[:ns], sh_t[:ns])
+            add_shadows(sh_idx[:ns], blocked, sh_c[:ns], L, nlanes)
+        if m == 0:
             break
-        idx, o_local, d = idx[keep], new_o[keep], new_d[keep]
     if first_t is None:
         first_t = np.full(n, MISS_DISTANCE, np.float32)
     return L, first_t
