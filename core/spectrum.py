@@ -50,7 +50,7 @@ round-trips exactly.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -245,6 +245,8 @@ def rgb_of(table: np.ndarray, mode: str = "cie1931") -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- sampling
+GUIDE_SIZE = 2048  # entries of the inverse-CDF guide table
+
 @dataclass(frozen=True, eq=False)
 class WavelengthSampler:
     """Piecewise-constant wavelength pdf over the 1 nm bins of [360, 830] (camera frame).
@@ -256,6 +258,14 @@ class WavelengthSampler:
     edges_nm: np.ndarray
     cdf: np.ndarray
     pdf: np.ndarray
+    guide: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # guide[g] = the bin holding u = g/G, so the inverse CDF starts its search there
+        g = np.arange(GUIDE_SIZE) / GUIDE_SIZE
+        k = self.pdf.shape[0]
+        guide = np.clip(np.searchsorted(self.cdf, g, side="right") - 1, 0, k - 1)
+        object.__setattr__(self, "guide", guide.astype(np.int64))
 
     def sample(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Inverse CDF: u ∈ [0, 1] -> (λ nm, pdf(λ) 1/nm), float64, same shape as u.
@@ -290,21 +300,27 @@ class WavelengthSampler:
         u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1))
         lam = np.empty((u.shape[0], n))
         pdf = np.empty((u.shape[0], n))
-        _hero_kernel(self.cdf, self.edges_nm, self.pdf, u, lam, pdf)
+        _hero_kernel(self.cdf, self.edges_nm, self.pdf, self.guide, u, lam, pdf)
         return lam, pdf
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _hero_kernel(cdf, edges, pdf, u, lam_out, pdf_out):
-    """λ_j = inverse-CDF((u + j/n) mod 1) for every u; exact pdf of the bin."""
+def _hero_kernel(cdf, edges, pdf, guide, u, lam_out, pdf_out):
+    """λ_j = inverse-CDF((u + j/n) mod 1) for every u; exact pdf of the bin.
+
+    The bin search starts at the guide table's bin for u and walks up (a few steps), so
+    it costs O(1) instead of a binary search.
+    """
     k = pdf.shape[0]
     n = lam_out.shape[1]
+    g = guide.shape[0]
     for i in range(u.shape[0]):
         for j in range(n):
             v = u[i] + j / n
             v = v - math.floor(v)
-            b = np.searchsorted(cdf, v, side="right") - 1
-            b = min(max(b, 0), k - 1)
+            b = guide[min(int(v * g), g - 1)]
+            while b < k - 1 and cdf[b + 1] <= v:
+                b += 1
             c0 = cdf[b]
             t = min(max((v - c0) / (cdf[b + 1] - c0), 0.0), 1.0)
             lo = edges[b]
