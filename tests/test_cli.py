@@ -115,3 +115,19 @@ def test_contact_sheet(tmp_path):
     assert read_png(sheet).shape == (16, 24 * 2 + 2, 3)
     r = run("contact-sheet", str(tmp_path / "empty"), "--out", str(sheet))
     assert r.returncode == 2
+
+
+def test_spectral_exr_is_written_and_readable_by_colour(tmp_path):
+    """formats = ["spectral-exr"] writes NAME.spectral.exr in the Fichet et al. 2021 layout."""
+    import colour
+
+    text = TINY.replace('name = "f_{frame:03d}"',
+                        'name = "f_{frame:03d}"\nformats = ["exr", "spectral-exr"]\n'
+                        'spectral_bands = [400, 700, 20]')
+    job = write_job(tmp_path, text)
+    assert cli.main(["render", str(job), "--quiet", "--frames", "1-1"]) == 0
+    path = tmp_path / "out" / "f_001.spectral.exr"
+    assert path.is_file() and (tmp_path / "out" / "f_001.exr").is_file()
+    wl, values = colour.io.read_spectral_image_Fichet2021(str(path))["S0"]
+    assert sorted(wl.tolist()) == list(range(400, 701, 20))
+    assert values.shape == (16, 24, 16) and values.max() > 0
