@@ -329,17 +329,25 @@ class Film:
         n = self.count.reshape((-1,) + (1,) * (s.ndim - 1))
         return np.divide(s, n, out=np.zeros(s.shape, np.float64), where=n > 0)
 
-    def relative_error(self) -> np.ndarray:
-        """float32 (h, w): relative standard error of each pixel's luminance mean."""
-        n = self.count.astype(np.float64)
-        mean_y = self._mean(self.sum_sensor[:, 1])
-        mean_y2 = self._mean(self.sum_y2)
-        enough = self.count >= 2
+    def relative_error(self, pixels: np.ndarray | None = None) -> np.ndarray:
+        """float32 (h, w): relative standard error of each pixel's luminance mean.
+
+        With ``pixels`` (flat indices), only those pixels, as a float32 (len(pixels),).
+        """
+        sel = slice(None) if pixels is None else np.asarray(pixels, np.int64)
+        count = self.count[sel]
+        n = count.astype(np.float64)
+        y, y2 = self.sum_sensor[sel, 1], self.sum_y2[sel]
+        mean_y = np.divide(y, n, out=np.zeros_like(n), where=count > 0)
+        mean_y2 = np.divide(y2, n, out=np.zeros_like(n), where=count > 0)
+        enough = count >= 2
         bessel = np.divide(n, n - 1.0, out=np.zeros_like(n), where=enough)
         var = bessel * np.maximum(mean_y2 - mean_y * mean_y, 0.0)
         se = np.sqrt(np.divide(var, n, out=np.zeros_like(n), where=enough))
         rel = se / np.maximum(np.abs(mean_y), self.luminance_floor)
         rel[~enough | ~np.isfinite(rel)] = REL_ERROR_UNKNOWN
+        if pixels is not None:
+            return rel.astype(np.float32)
         return rel.reshape(self.height, self.width).astype(np.float32)
 
     def resolve(self, sensor_to_rgb: np.ndarray) -> FilmImage:

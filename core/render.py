@@ -32,7 +32,7 @@ from .integrator import KernelScene, kernel_scene, sensor_values, trace, triangl
 from .job import Job, RenderSettings, beta_at_frame, frame_list
 from .lights import LightTable, build_lights
 from .materials import SpectralTables, build_tables
-from .sampling import path_keys, rand_dims
+from .sampling import path_keys, progressive_offsets, rand_dims
 from .scene import Scene
 
 WAVEFRONT = 1 << 16
@@ -89,6 +89,25 @@ def camera_settings(job: Job):
     return job.camera
 
 
+ADAPTIVE_FIRST_PASS = 8
+
+
+def sample_passes(s_lo: int, s_hi: int, adaptive: bool) -> list[tuple[int, int]]:
+    """Sample ranges rendered one after the other.
+
+    Without adaptive sampling, one pass [s_lo, s_hi).  With it (``noise_threshold`` > 0),
+    a first pass of ``ADAPTIVE_FIRST_PASS`` samples, then passes that double the count;
+    after each pass a pixel whose relative standard error of the luminance mean is at
+    most ``noise_threshold`` stops (so it keeps a power-of-two prefix of its samples).
+    """
+    if not adaptive:
+        return [(s_lo, s_hi)]
+    bounds = [s_lo, min(s_hi, s_lo + ADAPTIVE_FIRST_PASS)]
+    while bounds[-1] < s_hi:
+        bounds.append(min(s_hi, 2 * bounds[-1]))
+    return list(zip(bounds[:-1], bounds[1:], strict=True))
+
+
 def tiles(width: int, height: int, threads: int) -> list[tuple[int, int, int, int]]:
     """Square image tiles (x0, y0, x1, y1), small enough to give every thread work."""
     size = 64
@@ -140,7 +159,8 @@ class FrameRenderer:
 
         ``samples = (s0, s1)`` renders only the pixel samples s0 ≤ s < s1 of the frame's
         ``spp`` (a sample batch: batches of one frame merge with :meth:`Film.merge` into
-        the frame, because every random number is keyed by the sample index).
+        the frame, because every random number is keyed by the sample index).  Adaptive
+        sampling (``noise_threshold`` > 0) applies to whole frames only, not to batches.
         """
         s = self.settings
         s_lo, s_hi = samples if samples is not None else (0, s.spp)
@@ -151,18 +171,30 @@ class FrameRenderer:
         lock = threading.Lock()
         t0 = time.perf_counter()
 
+        adaptive = s.noise_threshold > 0.0 and samples is None
+
         def work(tile):
             x0, y0, x1, y1 = tile
             cols, rows = np.meshgrid(np.arange(x0, x1), np.arange(y0, y1))
-            pixels = (rows * s.width + cols).ravel().astype(np.int64)
-            chunk = max(1, WAVEFRONT // len(pixels))
-            for s0 in range(s_lo, s_hi, chunk):
-                if cancel is not None and cancel():
-                    raise RenderCancelled
-                s1 = min(s_hi, s0 + chunk)
-                self._trace_chunk(event, frame, pixels, s0, s1, film, lock, stats)
-                if progress is not None:
-                    progress(len(pixels) * (s1 - s0))
+            active = (rows * s.width + cols).ravel().astype(np.int64)
+            for a, b in sample_passes(s_lo, s_hi, adaptive):
+                chunk = max(1, WAVEFRONT // len(active))
+                for s0 in range(a, b, chunk):
+                    if cancel is not None and cancel():
+                        raise RenderCancelled
+                    s1 = min(b, s0 + chunk)
+                    self._trace_chunk(event, frame, active, s0, s1, film, lock, stats)
+                    if progress is not None:
+                        progress(len(active) * (s1 - s0))
+                if adaptive and b < s_hi:
+                    with lock:
+                        err = film.relative_error(active)
+                    done = err <= s.noise_threshold
+                    if progress is not None:
+                        progress(int(done.sum()) * (s_hi - b))
+                    active = active[~done]
+                    if len(active) == 0:
+                        return
 
         with ThreadPoolExecutor(self.threads) as pool:
             for f in [pool.submit(work, t) for t in tiles(s.width, s.height, self.threads)]:
@@ -188,7 +220,7 @@ class FrameRenderer:
             lamu = np.tile(np.array([0.0, 1.0, 2.0, 0.0], np.float32), (n, 1))
             nlanes = 3
         else:
-            u = (samp + rand_dims(keys, 2)) / s.spp
+            u = progressive_offsets(s.seed, frame, pix, samp)
             lam, pdf = self.sampler.hero(u)
             lam_lab = lam * D[:, None] if self.doppler else lam
             lamu = ((np.log(lam_lab) - spectrum.LOG_GRID_MIN) * spectrum.INV_DLOG).astype(

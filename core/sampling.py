@@ -117,3 +117,34 @@ def power_heuristic(pa, pb):
     a = pa * pa
     b = pb * pb
     return a / (a + b) if a + b > 0.0 else 0.0
+
+
+_MASK32 = np.uint64(0xFFFFFFFF)
+_SWAP_MASKS = np.array([0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF, 0x0000FFFF], np.uint64)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def radical_inverse2(i):
+    """Van der Corput radical inverse in base 2 of a sample index (32 bits), in [0, 1)."""
+    b = np.uint64(i) & _MASK32
+    for k in range(5):
+        sh = np.uint64(1 << k)
+        mask = _SWAP_MASKS[k]
+        b = ((b & mask) << sh) | ((b >> sh) & mask)
+    return np.float64(b) * (1.0 / 4294967296.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def progressive_offsets(seed, frame, pixels, samples):
+    """Per-sample offsets u = frac(vdc(sample) + r_pixel) for the hero wavelengths.
+
+    Any prefix of a pixel's samples is well stratified (van der Corput), and the random
+    per-pixel rotation r_pixel (Cranley–Patterson) keeps each u uniform, so a pixel that
+    stops early (adaptive sampling) or renders a sample batch stays unbiased.
+    """
+    out = np.empty(len(pixels), np.float64)
+    for i in range(len(pixels)):
+        r = rand(path_key(seed, frame, pixels[i], np.uint64(0xFFFFFFFF)), 2)
+        v = radical_inverse2(samples[i]) + r
+        out[i] = v - math.floor(v)
+    return out

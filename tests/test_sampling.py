@@ -62,3 +62,27 @@ def test_power_heuristic():
     assert sampling.power_heuristic(1.0, 1.0) == 0.5
     assert sampling.power_heuristic(0.0, 0.0) == 0.0
     assert math.isclose(sampling.power_heuristic(3.0, 1.0) + sampling.power_heuristic(1.0, 3.0), 1)
+
+
+def test_radical_inverse_is_the_bit_reversal():
+    assert [sampling.radical_inverse2(i) for i in range(4)] == [0.0, 0.5, 0.25, 0.75]
+    assert sampling.radical_inverse2(2**31) == 2.0**-32
+    assert sampling.radical_inverse2(2**32 - 1) == 1.0 - 2.0**-32
+
+
+def test_progressive_offsets_stratify_every_power_of_two_prefix():
+    """The first 2^k samples of a pixel put one offset in each of 2^k equal strata."""
+    for k in (2, 4, 6):
+        n = 2**k
+        u = sampling.progressive_offsets(3, 1, np.full(n, 77, np.int64), np.arange(n))
+        strata = np.floor(np.sort(u - u.min()) * n).astype(int)
+        assert np.array_equal(np.sort(np.floor(((u - u[0]) % 1.0) * n)), np.arange(n))
+        assert len(set(strata.tolist())) == n
+
+
+def test_progressive_offsets_are_uniform_over_pixels():
+    """For a fixed sample index the per-pixel rotation makes u uniform (unbiased)."""
+    n = 100_000
+    u = sampling.progressive_offsets(0, 0, np.arange(n), np.full(n, 5, np.int64))
+    counts, _ = np.histogram(u, bins=20, range=(0, 1))
+    assert np.all(np.abs(counts - n / 20) < 5 * math.sqrt(n / 20))
