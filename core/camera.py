@@ -21,9 +21,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from . import relativity
 from .job import CameraSettings
+from .relativity import aberrate_doppler_ray
+from .sampling import rand
 
 
 @dataclass(frozen=True)
@@ -45,21 +48,93 @@ class PinholeCamera:
         return cls(np.asarray(cam.rotation, np.float64), tan_half, width, height,
                    tuple(cam.shift))
 
+    def window(self) -> tuple[float, float, float, float, float]:
+        """(tan(fov/2), aspect, scale, shift_x, shift_y) for :func:`view_direction`."""
+        aspect = self.width / self.height
+        scale = max(self.width, self.height) / self.height
+        return self.tan_half_fov, aspect, scale, float(self.shift[0]), float(self.shift[1])
+
     def directions_cam(self, col: np.ndarray, row: np.ndarray) -> np.ndarray:
         """Unit camera-frame viewing directions d_cam through image points.
 
         ``col`` and ``row`` are continuous pixel coordinates (pixel centre = index + 0.5),
         row 0 at the top.  x_ndc = (2 col/W - 1)·tan(fov/2)·W/H, y_ndc = (1 - 2 row/H)·tan(fov/2).
         """
-        aspect = self.width / self.height
-        scale = max(self.width, self.height) / self.height
-        x = ((2.0 * col / self.width - 1.0) * aspect + 2.0 * self.shift[0] * scale)
-        y = ((1.0 - 2.0 * row / self.height) + 2.0 * self.shift[1] * scale)
-        x = x * self.tan_half_fov
-        y = y * self.tan_half_fov
-        r = self.rotation
-        d = x[:, None] * r[:, 0] + y[:, None] * r[:, 1] - r[:, 2]
-        return d / np.linalg.norm(d, axis=1, keepdims=True)
+        out = np.empty((len(col), 3))
+        _directions(self.rotation, *self.window(), self.width, self.height,
+                    np.asarray(col, np.float64), np.asarray(row, np.float64), out)
+        return out
+
+    def primary_rays(self, beta: np.ndarray, keys: np.ndarray, pixels: np.ndarray,
+                     origin_local: np.ndarray, radius: float):
+        """The camera stage of a wavefront, fused in one kernel.
+
+        Jitters each path's pixel (RNG dimensions 0 and 1), builds d_cam, aberrates it into
+        the lab and computes D; the ray starts at the shutter event (``origin_local``, in
+        accelerator coordinates, float64) advanced to the scene's bounding sphere of
+        ``radius``.  Returns (o float32 (N,3), d_lab float32 (N,3), D float64 (N,),
+        skipped distance float64 (N,)).
+        """
+        n = len(keys)
+        o = np.empty((n, 3), np.float32)
+        d = np.empty((n, 3), np.float32)
+        D = np.empty(n)
+        skipped = np.empty(n)
+        _primary_rays(self.rotation, *self.window(), self.width, self.height,
+                      *relativity.beta_kernel_args(beta), keys, pixels,
+                      np.asarray(origin_local, np.float64), float(radius), o, d, D, skipped)
+        return o, d, D, skipped
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def view_direction(rot, tan_half, aspect, scale, sx, sy, width, height, col, row):
+    """Unit d_cam through the continuous pixel position (col, row), row 0 at the top."""
+    x = ((2.0 * col / width - 1.0) * aspect + 2.0 * sx * scale) * tan_half
+    y = ((1.0 - 2.0 * row / height) + 2.0 * sy * scale) * tan_half
+    dx = x * rot[0, 0] + y * rot[0, 1] - rot[0, 2]
+    dy = x * rot[1, 0] + y * rot[1, 1] - rot[1, 2]
+    dz = x * rot[2, 0] + y * rot[2, 1] - rot[2, 2]
+    inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+    return dx * inv, dy * inv, dz * inv
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _directions(rot, tan_half, aspect, scale, sx, sy, width, height, col, row, out):
+    for i in range(len(col)):
+        out[i, 0], out[i, 1], out[i, 2] = view_direction(
+            rot, tan_half, aspect, scale, sx, sy, width, height, col[i], row[i])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _primary_rays(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, hz, b, inv_g,
+                  keys, pixels, x0, radius, o, d, D, skipped):
+    r2 = radius * radius
+    c = x0[0] * x0[0] + x0[1] * x0[1] + x0[2] * x0[2] - r2
+    for i in range(len(keys)):
+        p = pixels[i]
+        col = (p % width) + rand(keys[i], 0)
+        row = (p // width) + rand(keys[i], 1)
+        dx, dy, dz = view_direction(rot, tan_half, aspect, scale, sx, sy, width, height,
+                                    col, row)
+        f = 1.0
+        if b > 0.0:
+            dx, dy, dz, f = aberrate_doppler_ray(dx, dy, dz, hx, hy, hz, b, inv_g)
+        # advance to the bounding sphere |x0 + t d| = radius (float64), if outside it;
+        # the discriminant from the perpendicular offset p = x0 - (x0·d) d, not from
+        # (x0·d)² - |x0|² + r², which cancels catastrophically for a far camera
+        t_in = 0.0
+        if c > 0.0:
+            bb = dx * x0[0] + dy * x0[1] + dz * x0[2]
+            px, py, pz = x0[0] - bb * dx, x0[1] - bb * dy, x0[2] - bb * dz
+            disc = r2 - (px * px + py * py + pz * pz)
+            if disc > 0.0:
+                t_in = max(0.0, -bb - math.sqrt(disc))
+        o[i, 0] = x0[0] + t_in * dx
+        o[i, 1] = x0[1] + t_in * dy
+        o[i, 2] = x0[2] + t_in * dz
+        d[i, 0], d[i, 1], d[i, 2] = dx, dy, dz
+        D[i] = f
+        skipped[i] = t_in
 
 
 def lab_rays(d_cam: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -48,6 +48,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike
 
 from .errors import UserError
@@ -592,3 +593,36 @@ def check_beta(beta: object, key: str = "motion.beta") -> np.ndarray:
     if b >= 1.0:
         raise UserError(f"|beta| = {b!r} must be below 1 (the speed of light)", key=key)
     return arr
+
+
+# ----------------------------------------------------------------- per-ray kernel form
+@njit(cache=True, nogil=True, error_model="numpy")
+def aberrate_doppler_ray(dx, dy, dz, hx, hy, hz, b, inv_g):
+    """One camera-frame view d' -> (unit d_lab, D), for the kernels (numba, float64).
+
+    The same cancellation-free forms as :func:`aberrate` and :func:`doppler_factor`:
+    with the chord c = d' - β̂ (β̂ = (hx, hy, hz), b = |β|, inv_g = 1/γ),
+    1 - cos θ' = |c|²/2, d_lab ∝ ((1 - b) - (1 - cos θ')) β̂ + (c - (c·β̂) β̂)/γ and
+    D = 1/(γ (1 - β·d')) with 1 - β·d' = (1 - b) + b (1 - cos θ').
+    Call only for b > 0 (at β = 0, d_lab = d' and D = 1 exactly).
+    """
+    cx, cy, cz = dx - hx, dy - hy, dz - hz
+    omc = 0.5 * (cx * cx + cy * cy + cz * cz)
+    ch = cx * hx + cy * hy + cz * hz
+    a = (1.0 - b) - omc
+    lx = a * hx + inv_g * (cx - ch * hx)
+    ly = a * hy + inv_g * (cy - ch * hy)
+    lz = a * hz + inv_g * (cz - ch * hz)
+    inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
+    D = inv_g / ((1.0 - b) + b * omc)
+    return lx * inv, ly * inv, lz * inv, D
+
+
+def beta_kernel_args(beta: ArrayLike) -> tuple[float, float, float, float, float]:
+    """(β̂x, β̂y, β̂z, b, 1/γ) for :func:`aberrate_doppler_ray`; zeros and 1/γ = 1 at rest."""
+    v = _as_vector3(beta, "beta")
+    b = float(_checked_speed(v))
+    if b == 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0
+    h = _unit(v)
+    return float(h[0]), float(h[1]), float(h[2]), b, float(_inv_gamma(b))

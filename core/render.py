@@ -26,13 +26,13 @@ import numpy as np
 
 from . import relativity, spectrum
 from .accel import MISS_DISTANCE, Accel
-from .camera import PinholeCamera, lab_rays
+from .camera import PinholeCamera
 from .film import Film
 from .integrator import KernelScene, kernel_scene, sensor_values, trace, triangle_geometry
 from .job import Job, RenderSettings, beta_at_frame, frame_list
 from .lights import LightTable, build_lights
 from .materials import SpectralTables, build_tables
-from .sampling import path_keys, progressive_offsets, rand_dims
+from .sampling import path_keys, progressive_offsets
 from .scene import Scene
 
 WAVEFRONT = 1 << 16
@@ -209,10 +209,9 @@ class FrameRenderer:
         pix = np.repeat(pixels, n_s)
         samp = np.tile(np.arange(s0, s1, dtype=np.int64), len(pixels))
         keys = path_keys(s.seed, frame, pix, samp)
-        col = (pix % s.width) + rand_dims(keys, 0)
-        row = (pix // s.width) + rand_dims(keys, 1)
-        d_cam = self.camera.directions_cam(col, row)
-        d_lab, D = lab_rays(d_cam, event.beta)
+        o_local, d_lab, D, skipped = self.camera.primary_rays(
+            event.beta, keys, pix, np.asarray(event.x, np.float64) - prep.accel.origin,
+            prep.radius)
         n = len(pix)
         if self.rgb_mode:
             lam = np.zeros((n, 4))
@@ -222,14 +221,11 @@ class FrameRenderer:
         else:
             u = progressive_offsets(s.seed, frame, pix, samp)
             lam, pdf = self.sampler.hero(u)
-            lam_lab = lam * D[:, None] if self.doppler else lam
-            lamu = ((np.log(lam_lab) - spectrum.LOG_GRID_MIN) * spectrum.INV_DLOG).astype(
-                np.float32)
+            lamu = spectrum.grid_coordinates(lam, D if self.doppler else None)
             nlanes = 4
         w_d = D**5 if self.searchlight else np.ones(n)
-        o_local, skipped = self._enter_scene(event.x, d_lab)
-        L, t_hit = trace(prep.kernel, prep.accel, s.max_depth, keys, o_local,
-                         d_lab.astype(np.float32), lamu, nlanes)
+        L, t_hit = trace(prep.kernel, prep.accel, s.max_depth, keys, o_local, d_lab, lamu,
+                         nlanes)
         hit = t_hit < MISS_DISTANCE
         dist = np.where(hit, t_hit + skipped, ESCAPED_DEPTH)
         sensor = np.empty((n, 3), np.float64)
@@ -243,17 +239,6 @@ class FrameRenderer:
             stats.paths += n
             stats.d_min = min(stats.d_min, float(D.min()))
             stats.d_max = max(stats.d_max, float(D.max()))
-
-    def _enter_scene(self, x_lab: np.ndarray, d_lab: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Origins in accelerator coordinates, advanced (float64) to the bounding sphere."""
-        o = np.asarray(x_lab, np.float64) - self.prep.accel.origin
-        b = d_lab[:, 0] * o[0] + d_lab[:, 1] * o[1] + d_lab[:, 2] * o[2]
-        c = float(o @ o) - self.prep.radius**2
-        disc = b * b - c
-        t_in = np.where((c > 0) & (disc > 0), -b - np.sqrt(np.maximum(disc, 0.0)), 0.0)
-        t_in = np.maximum(t_in, 0.0)
-        o_adv = o[None, :] + t_in[:, None] * d_lab
-        return o_adv.astype(np.float32), t_in
 
 
 def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent) -> dict[str, str]:

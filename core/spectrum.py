@@ -329,6 +329,26 @@ def _hero_kernel(cdf, edges, pdf, guide, u, lam_out, pdf_out):
             pdf_out[i, j] = pdf[b]
 
 
+def grid_coordinates(lam_cam: np.ndarray, doppler: np.ndarray | None = None) -> np.ndarray:
+    """Fractional grid indices u = (ln λ_lab - LOG_GRID_MIN)·INV_DLOG, float32 (N, k).
+
+    λ_lab = D·λ_cam per row when ``doppler`` (D, (N,)) is given (physics.md: the lab
+    wavelength a camera wavelength came from), else λ_lab = λ_cam.
+    """
+    out = np.empty(lam_cam.shape, np.float32)
+    d = np.ones(lam_cam.shape[0]) if doppler is None else np.asarray(doppler, np.float64)
+    _grid_coordinates(np.ascontiguousarray(lam_cam, np.float64), d, out)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _grid_coordinates(lam, d, out):
+    for i in range(lam.shape[0]):
+        shift = math.log(d[i])
+        for j in range(lam.shape[1]):
+            out[i, j] = (math.log(lam[i, j]) + shift - LOG_GRID_MIN) * INV_DLOG
+
+
 def make_sampler(
     mode: str = "cie1931",
     bands: tuple[float, float, float] | None = None,

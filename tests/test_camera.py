@@ -1,0 +1,61 @@
+"""The relativistic pinhole: pixel → d_cam → aberrated lab ray, D, bounding-sphere start."""
+
+import math
+
+import numpy as np
+
+from relray.core import relativity
+from relray.core.camera import PinholeCamera
+from relray.core.job import look_at_rotation
+from relray.core.sampling import path_keys, rand_dims
+
+
+def camera(width=40, height=30, fov=50.0):
+    rot = look_at_rotation(np.zeros(3), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]))
+    return PinholeCamera(rot, math.tan(math.radians(fov) / 2), width, height)
+
+
+def test_image_corners_follow_the_pinhole_convention():
+    """Row 0 is the top, column 0 the left; fov is the full vertical angle."""
+    cam = camera()
+    d = cam.directions_cam(np.array([20.0, 0.0, 20.0]), np.array([15.0, 15.0, 0.0]))
+    np.testing.assert_allclose(d[0], [0, 1, 0], atol=1e-15)            # centre: forward
+    assert d[1, 0] < 0 and abs(d[1, 2]) < 1e-15                        # left edge: -x
+    assert math.isclose(math.degrees(math.atan2(d[2, 2], d[2, 1])), 25.0, rel_tol=1e-12)
+
+
+def test_primary_rays_at_rest_are_the_jittered_pinhole():
+    cam = camera()
+    pix = np.arange(cam.width * cam.height, dtype=np.int64)
+    keys = path_keys(0, 1, pix, np.zeros_like(pix))
+    o, d, D, skipped = cam.primary_rays(np.zeros(3), keys, pix, np.zeros(3), 100.0)
+    col = pix % cam.width + rand_dims(keys, 0)
+    row = pix // cam.width + rand_dims(keys, 1)
+    np.testing.assert_allclose(d, cam.directions_cam(col, row), atol=1e-7)   # float32 out
+    assert np.all(D == 1.0) and np.all(skipped == 0.0) and np.all(o == 0.0)
+
+
+def test_primary_rays_are_aberrated_and_doppler_shifted():
+    cam = camera()
+    beta = np.array([0.9, 0.0, 0.0])
+    pix = np.arange(cam.width * cam.height, dtype=np.int64)
+    keys = path_keys(0, 1, pix, np.zeros_like(pix))
+    _, d, D, _ = cam.primary_rays(beta, keys, pix, np.zeros(3), 100.0)
+    d_cam = cam.directions_cam(pix % cam.width + rand_dims(keys, 0),
+                               pix // cam.width + rand_dims(keys, 1))
+    np.testing.assert_allclose(d, relativity.aberrate(d_cam, beta), atol=1e-7)
+    np.testing.assert_allclose(D, relativity.doppler_factor(d_cam, beta), rtol=1e-14)
+
+
+def test_far_camera_starts_on_the_bounding_sphere():
+    """From 1e6 away the ray is advanced in float64 to the sphere; the line is unchanged."""
+    cam = camera(fov=1e-5)   # so that every pixel of the image sees the sphere from 1e6
+    x0 = np.array([0.0, -1e6, 0.0])
+    pix = np.array([cam.width * cam.height // 2 + cam.width // 2], np.int64)
+    keys = path_keys(0, 0, pix, np.zeros(1, np.int64))
+    o, d, _, skipped = cam.primary_rays(np.zeros(3), keys, pix, x0, 2.0)
+    assert abs(np.linalg.norm(o[0].astype(np.float64)) - 2.0) < 1e-6
+    back = o[0].astype(np.float64) - skipped[0] * d[0].astype(np.float64)
+    assert np.linalg.norm(back - x0) < 0.1   # float32 direction over 1e6: ~0.06 at most
+    assert math.isclose(skipped[0], 1e6 - math.sqrt(4.0 - np.sum(o[0, [0, 2]] ** 2)),
+                        rel_tol=1e-9)
