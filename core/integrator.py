@@ -138,6 +138,7 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
     n_alive = 0
     n_sh = 0
     lane_c = np.zeros(4, np.float32)
+    rho_j = np.zeros(4, np.float64)   # ρ(λ_lab) of the hit's material per hero lane
     for i in range(n):
         pi = idx[i]
         key = keys[pi]
@@ -190,6 +191,9 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
         wd = sc.mat_w[m, 0]
         wm = sc.mat_w[m, 1]
         wg = sc.mat_w[m, 2]
+        if wd + wm > 0.0:
+            for j in range(nlanes):
+                rho_j[j] = lookup(sc.refl, m, lamu[pi, j])
         a = sc.mat_alpha[m]
         a2 = a * a
         metal_delta = wm > 0.0 and a < DELTA_ALPHA
@@ -260,7 +264,7 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
                     c = w * cos_i * scale / p_l
                     row = sc.l_row[k]
                     for j in range(nlanes):
-                        rho = lookup(sc.refl, m, lamu[pi, j])
+                        rho = rho_j[j]
                         f = kd * rho + km * (rho + (1.0 - rho) * s)
                         lane_c[j] = thr[pi, j] * f * c * lookup(sc.emit, row, lamu[pi, j])
                     ox, oy, oz = px + gx * eps, py + gy * eps, pz + gz * eps
@@ -309,7 +313,7 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
             wiz = 2.0 * cos_o * nz - wo[2]
             s = schlick_weight(cos_o)
             for j in range(nlanes):
-                rho = lookup(sc.refl, m, lamu[pi, j])
+                rho = rho_j[j]
                 thr[pi, j] *= rho + (1.0 - rho) * s
             prev_delta[pi] = 1
         else:
@@ -334,7 +338,7 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
             # density of wi is w_d p_d + w_m p_m = pdf_b (one-sample MIS over the lobes)
             c = cos_i / pdf_b
             for j in range(nlanes):
-                rho = lookup(sc.refl, m, lamu[pi, j])
+                rho = rho_j[j]
                 thr[pi, j] *= (kd * rho + km * (rho + (1.0 - rho) * s)) * c
             prev_pdf[pi] = pdf_b
             prev_delta[pi] = 0
