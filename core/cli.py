@@ -1,21 +1,35 @@
 """The command line: ``relray render``, ``relray info``, ``relray contact-sheet``.
 
-Every user error (a malformed job, a missing file, |β| ≥ 1, ...) ends with one line on
-stderr naming the key and the file, exit code 2, and no file written.
+Every user error (a malformed job, a missing file, |β| ≥ 1, an unreachable
+``--scheduler``, ...) ends with one line on stderr naming the key and the file, exit
+code 2, and no file written.
+
+``relray render`` renders in this process by default; ``--scheduler tcp://HOST:8786``
+sends the frames to a Dask cluster and ``--workers N`` to a LocalCluster on 127.0.0.1
+(see :mod:`.farm`). ``--json-progress`` prints JSON lines for other programs (the
+subprocess contract in :mod:`.farm`). Exit codes: 0 done, 1 some frames failed, 2 a
+user error, 130 interrupted (SIGINT or SIGTERM; finished frames stay, a rerun resumes).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
 from .errors import UserError
 
+EXIT_FRAMES_FAILED = 1
 EXIT_USER_ERROR = 2
+EXIT_INTERRUPTED = 130
 
 
 def parse_frames(text: str) -> tuple[int, int]:
@@ -41,8 +55,16 @@ def parse_vector(text: str, key: str) -> np.ndarray:
     return v
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse whose errors (an option of the wrong type, a missing argument) are one
+    line naming the option, exit code 2, like every other user error."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USER_ERROR, f"relray: error: {' '.join(message.split())}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="relray", description=__doc__.splitlines()[0])
+    p = OneLineParser(prog="relray", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a job's frames")
     r.add_argument("job", type=Path)
@@ -54,6 +76,16 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--threads", type=int, help="worker threads (0 = all cores)")
     r.add_argument("--overwrite", action="store_true", help="render finished frames again")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--scheduler", metavar="ADDRESS",
+                   help="render on a Dask cluster: its scheduler, tcp://HOST:8786")
+    r.add_argument("--workers", type=int, metavar="N",
+                   help="render on a local Dask cluster of N processes (127.0.0.1)")
+    r.add_argument("--batches", type=int, default=16, metavar="N",
+                   help="sample batches of a still on a Dask cluster (default 16)")
+    r.add_argument("--connect-timeout", type=float, default=10.0, metavar="S",
+                   help="seconds to reach --scheduler (default 10)")
+    r.add_argument("--json-progress", action="store_true",
+                   help="print progress as JSON lines on stdout (for other programs)")
     i = sub.add_parser("info", help="print the parsed job, gamma and the D range")
     i.add_argument("job", type=Path)
     c = sub.add_parser("contact-sheet", help="tile a folder's PNG frames into one image")
@@ -78,13 +110,81 @@ def load_with_overrides(args: argparse.Namespace):
     )
 
 
-def cmd_render(args: argparse.Namespace) -> int:
-    from .render import render_job
+def check_farm_options(args: argparse.Namespace) -> None:
+    """The Dask options make sense together (user errors name the option)."""
+    if args.scheduler is not None and args.workers is not None:
+        raise UserError("give either --scheduler or --workers, not both", key="--workers")
+    if args.scheduler is not None and not args.scheduler.strip():
+        raise UserError("expected tcp://HOST:PORT, got ''", key="--scheduler")
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        raise UserError(f"must be 1..1024, got {args.workers}", key="--workers")
+    if not 1 <= args.batches <= 65536:
+        raise UserError(f"must be 1..65536, got {args.batches}", key="--batches")
+    if not 0.0 < args.connect_timeout <= 3600.0:
+        raise UserError(f"must be in (0, 3600] seconds, got {args.connect_timeout}",
+                        key="--connect-timeout")
 
-    job = load_with_overrides(args)
-    written = render_job(job, overwrite=args.overwrite, show_progress=not args.quiet)
-    for path in written:
-        print(path)
+
+@contextlib.contextmanager
+def interrupts(cancel: threading.Event) -> Iterator[None]:
+    """SIGINT and SIGTERM set ``cancel`` and raise KeyboardInterrupt (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        cancel.set()
+        raise KeyboardInterrupt
+
+    names = ("SIGINT", "SIGTERM", "SIGBREAK")
+    sigs = [getattr(signal, n) for n in names if hasattr(signal, n)]
+    old = {sig: signal.signal(sig, handler) for sig in sigs}
+    try:
+        yield
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from . import farm
+    from .render import RenderCancelled, render_job
+
+    reporter = farm.default_reporter(not args.quiet, args.json_progress)
+    cancel = threading.Event()
+    failed: dict[int, str] = {}
+    try:
+        with interrupts(cancel):
+            check_farm_options(args)
+            job = load_with_overrides(args)
+            if args.scheduler is not None or args.workers is not None:
+                result = farm.render(job, scheduler=args.scheduler, workers=args.workers or 0,
+                                     overwrite=args.overwrite, reporter=reporter,
+                                     batches=args.batches,
+                                     connect_timeout=args.connect_timeout)
+                written, failed = result.written, result.failed
+            else:
+                written = render_job(job, overwrite=args.overwrite, reporter=reporter,
+                                     cancel=cancel.is_set)
+    except UserError as e:
+        if isinstance(reporter, farm.JsonReporter):
+            reporter.error(None, str(e), kind="user")
+        reporter.finish("error", exit_code=EXIT_USER_ERROR)
+        raise
+    except (KeyboardInterrupt, RenderCancelled):
+        reporter.finish("cancelled", exit_code=EXIT_INTERRUPTED)
+        raise KeyboardInterrupt from None
+    if not isinstance(reporter, farm.TqdmReporter):  # the bar printed them as they came
+        for frame, message in sorted(failed.items()):
+            print(f"relray: error: frame {frame} failed: {message}", file=sys.stderr)
+    if failed:
+        print(f"relray: error: {len(failed)} frame(s) failed: "
+              f"{', '.join(str(f) for f in sorted(failed))}; the others are done, "
+              "a rerun renders only the missing frames", file=sys.stderr)
+        return EXIT_FRAMES_FAILED
+    if not args.json_progress:
+        for path in written:
+            print(path)
     return 0
 
 
@@ -128,7 +228,11 @@ def cmd_contact_sheet(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    before = list(logging.getLogger().handlers)
     logging.basicConfig(level=logging.WARNING, format="relray: %(message)s")
+    for handler in logging.getLogger().handlers:  # libraries' INFO chatter (Dask) stays out
+        if handler not in before:
+            handler.setLevel(logging.WARNING)
     args = build_parser().parse_args(argv)
     commands = {"render": cmd_render, "info": cmd_info, "contact-sheet": cmd_contact_sheet}
     try:
@@ -138,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("relray: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -278,50 +278,97 @@ def resolve_camera(job: Job, scene: Scene):
     return cam
 
 
-def render_job(job: Job, overwrite: bool = False, show_progress: bool = True) -> list:
-    """Render every frame of ``job`` that is not already done; return the written paths."""
-    import logging
+def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,
+               reporter=None, cancel: Callable[[], bool] | None = None) -> list:
+    """Render every frame of ``job`` that is not already done; return the written paths.
 
-    from tqdm import tqdm
-
-    from .imageio import remove_stale_temps, write_frame
+    This is the local default: one process, frames one after another, every core on the
+    frame in flight through the renderer's threads. ``reporter`` (a
+    :class:`.farm.Reporter`) hears the plan ("N done, M to render"), the progress in
+    paths, each finished frame and the end; by default a tqdm bar (nothing without
+    ``show_progress``). ``cancel`` is polled between wavefronts; when it says True the
+    frame in flight stops with :class:`RenderCancelled` (finished frames stay).
+    """
+    from .farm import default_reporter
     from .scene import build_scene
 
-    log = logging.getLogger("relray")
+    reporter = reporter if reporter is not None else default_reporter(show_progress)
+    t0 = time.perf_counter()
     scene = build_scene(job)
-    cam = resolve_camera(job, scene)
+    resolve_camera(job, scene)
+    plan = plan_frames(job, overwrite)
+    s = job.render
+    reporter.start(job, plan, mode="local", units=len(plan.todo) * s.width * s.height * s.spp,
+                   unit="path")
+    written: list = []
+    if plan.todo:
+        renderer = build_renderer(job, scene)
+        for frame, ev in plan.todo:
+            film, stats = renderer.render(ev, frame, progress=reporter.advance, cancel=cancel)
+            paths = write_film(job, frame, ev, film, renderer.to_rgb, stats.seconds,
+                               (stats.d_min, stats.d_max))
+            written += paths
+            reporter.frame_done(frame, paths, stats.seconds, (stats.d_min, stats.d_max))
+    reporter.finish("ok", time.perf_counter() - t0)
+    return written
+
+
+@dataclass
+class FramePlan:
+    """Which frames of a job's range still need rendering (resume), from :func:`plan_frames`."""
+
+    frames: list[int]
+    todo: list[tuple[int, relativity.ShutterEvent]]
+    stale_temps_removed: int = 0
+
+    @property
+    def done(self) -> int:
+        """Frames of the range already complete (skipped)."""
+        return len(self.frames) - len(self.todo)
+
+
+def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
+    """The frames to render: all with ``overwrite``, else those not :func:`frame_is_done`.
+
+    Also removes stale temporary files of interrupted writes from the output folder.
+    """
+    from .imageio import remove_stale_temps
+
     events = frame_events(job)
     todo = [(f, ev) for f, ev in events if overwrite or not frame_is_done(job, f, ev)]
-    if job.output.dir.exists():
-        remove_stale_temps(job.output.dir)
-    if show_progress:
-        print(f"relray: {len(events) - len(todo)} done, {len(todo)} to render "
-              f"-> {job.output.dir}", flush=True)
-    if not todo:
-        return []
-    prep = prepare(scene, job.render.spectral)
-    s = job.render
-    renderer = FrameRenderer(prep, s, PinholeCamera.from_settings(cam, s.width, s.height),
-                             aovs=job.output.aovs,
-                             bands=job.output.spectral_bands
-                             if "spectral-exr" in job.output.formats else None)
-    total = len(todo) * s.width * s.height * s.spp
-    bar = tqdm(total=total, unit="path", unit_scale=True, disable=not show_progress,
-               desc="render", dynamic_ncols=True)
-    written = []
-    try:
-        for frame, ev in todo:
-            film, stats = renderer.render(ev, frame, progress=bar.update)
-            if film.nonfinite_samples:
-                log.warning("frame %d: %d non-finite samples dropped", frame,
-                            film.nonfinite_samples)
-            image = film.resolve(renderer.to_rgb)
-            meta = frame_metadata(job, frame, ev)
-            meta["relray:seconds"] = f"{stats.seconds:.3f}"
-            meta["relray:doppler_range"] = f"{stats.d_min:.6g},{stats.d_max:.6g}"
-            written += write_frame(job.output.dir, job.output.name.format(frame=frame),
-                                   job.output.formats, image, meta, job.output.exposure)
-            bar.set_postfix_str(f"frame {frame} D {stats.d_min:.3g}..{stats.d_max:.3g}")
-    finally:
-        bar.close()
-    return written
+    removed = remove_stale_temps(job.output.dir) if job.output.dir.exists() else 0
+    return FramePlan([f for f, _ in events], todo, removed)
+
+
+def build_renderer(job: Job, scene: Scene | None = None,
+                   threads: int | None = None) -> FrameRenderer:
+    """A :class:`FrameRenderer` for ``job`` (scene, BVH, tables); ``threads`` overrides."""
+    from dataclasses import replace
+
+    from .scene import build_scene
+
+    scene = scene if scene is not None else build_scene(job)
+    cam = resolve_camera(job, scene)
+    s = job.render if threads is None else replace(job.render, threads=int(threads))
+    prep = prepare(scene, s.spectral)
+    bands = job.output.spectral_bands if "spectral-exr" in job.output.formats else None
+    return FrameRenderer(prep, s, PinholeCamera.from_settings(cam, s.width, s.height),
+                         aovs=job.output.aovs, bands=bands)
+
+
+def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
+               to_rgb: np.ndarray, seconds: float, d_range: tuple[float, float]) -> list:
+    """Resolve ``film`` and write the frame's files atomically (EXR last); return the paths."""
+    import logging
+
+    from .imageio import write_frame
+
+    if film.nonfinite_samples:
+        logging.getLogger("relray").warning("frame %d: %d non-finite samples dropped", frame,
+                                            film.nonfinite_samples)
+    image = film.resolve(to_rgb)
+    meta = frame_metadata(job, frame, event)
+    meta["relray:seconds"] = f"{seconds:.3f}"
+    meta["relray:doppler_range"] = f"{d_range[0]:.6g},{d_range[1]:.6g}"
+    return write_frame(job.output.dir, job.output.name.format(frame=frame), job.output.formats,
+                       image, meta, job.output.exposure)

@@ -1,0 +1,748 @@
+"""Animations at scale: frames and sample batches on Dask, resume, progress for tools.
+
+What it does
+------------
+``relray render JOB`` renders in this process by default: frames one after another,
+every core on the frame in flight through the renderer's own threads
+(:func:`.render.render_job`). Measured on the 2-core development machine this is at least
+as fast as a LocalCluster of process workers (README, "Rendering on a farm"), and it needs
+no set-up, no ports and no second copy of the scene in memory. The same command then
+scales out:
+
+- ``--scheduler tcp://HOST:8786``: the frames go to a running Dask cluster
+  (:func:`render_on_dask`); the job file, the files it names and the output folder must
+  be on a file system that every worker sees at the same path.
+- ``--workers N``: the same on a LocalCluster of N process workers bound to 127.0.0.1
+  (fault isolation, and what the fault-tolerance tests use).
+
+In every mode a rerun resumes: :func:`.render.plan_frames` skips the frames whose EXR
+is complete and matches the job (spp, β, ct, spectral mode, seed), removes stale
+temporary files and reports "N done, M to render"; ``--overwrite`` renders them again.
+
+The task model
+--------------
+- **An animation** (two or more frames to render): one task per frame
+  (:func:`render_frame_task`). A task renders its frame with all the threads it is given
+  and writes the frame's files itself, atomically (temporary file, then rename; the EXR
+  last, so a complete EXR means a complete frame); only paths and timings travel back.
+  The scene, BVH and spectral tables are built once per worker process and run
+  (:func:`worker_renderer`). Before rendering, a task checks again whether its frame is
+  done, so a task that is re-run after its frame was written renders nothing twice.
+- **A still** (exactly one frame to render): the frame's samples are split into
+  ``batches`` ranges [s_k, s_k+1) (:func:`sample_batches`), one task each
+  (:func:`render_batch_task`), which returns its :class:`~.film.Film`. The client merges
+  the films in batch order (:meth:`Film.merge` adds per-pixel sums and sample counts, so
+  every sample has the same weight) and writes the frame. A still with adaptive sampling
+  (``noise_threshold`` > 0) is one task: its stopping rule needs all samples of a pixel.
+- **Faults**: a worker that dies takes its task with it and the scheduler runs the task
+  again on another worker (up to Dask's ``distributed.scheduler.allowed-failures``); a
+  task that raises is tried ``TASK_RETRIES`` more times, then its frame fails alone: the
+  other frames finish, the error names the frame and the command exits 1.
+- **Cores**: run one Dask worker per node with ``--nthreads 1``; the task then uses the
+  node's cores through the core's own threads (``render.threads``, else the cores this
+  process may use divided by the Dask worker threads on its host, so neither Dask's
+  default of one thread per core nor several workers on a node oversubscribe it:
+  :func:`task_threads`). Dask's nanny starts workers with
+  ``OMP/OPENBLAS/MKL_NUM_THREADS=1`` and ``relray.core`` sets the same defaults, so
+  BLAS is pinned to one thread.
+
+Determinism
+-----------
+Every random number is a hash of (seed, frame, pixel, sample, dimension), never of a
+worker or a thread, and each pixel sums its samples in sample order whatever the
+tiling. A frame task renders all samples of its frame exactly as the one-process
+renderer does, so an animation frame is bit-identical whichever worker renders it and
+however many there are. A still's batch boundaries depend only on ``spp`` and
+``batches`` (not on the number of workers) and the films merge in batch order, so a
+still is bit-identical for any number of workers. Against the one-process render a
+batched still associates its float64 sums differently ((a+b)+(c+d) instead of
+((a+b)+c)+d): about 1e-16 relative, which reaches the float32 output only when a value
+lies that close to a float32 rounding boundary (none of the test images' values did).
+
+Progress and the subprocess contract (for the Blender add-on and farm managers)
+-------------------------------------------------------------------------------
+``relray render JOB --json-progress`` prints one JSON object per line on stdout,
+flushed, and nothing else there (:class:`JsonReporter`); stderr carries human-readable
+warnings only. Every object has ``"event"``:
+
+============  ==========================================================================
+event         fields
+============  ==========================================================================
+start         version, job, out, mode ("local" | "dask"), scheduler, workers,
+              frames [first, last], done, to_render, todo [frames], unit, units
+progress      fraction (0..1), frames_done, frames_total, elapsed, eta_seconds (or null)
+frame_done    frame, path (the EXR, else the first file), paths, seconds, fraction,
+              frames_done, frames_total
+error         frame (null when not about one frame), message, kind ("frame" | "user")
+finish        status ("ok" | "failed" | "cancelled" | "error"), exit_code, rendered,
+              failed [frames], seconds
+============  ==========================================================================
+
+Exit codes: 0 every frame done; 1 some frames failed (each named in an ``error``
+event and on stderr); 2 a user error (one line on stderr naming the key and the file,
+nothing written); 130 cancelled. To cancel, send SIGINT or SIGTERM (Windows:
+``CTRL_BREAK_EVENT`` to a process started with ``CREATE_NEW_PROCESS_GROUP``, or
+terminate it): the frame in flight is abandoned, finished frames stay, and the next run
+resumes. :func:`render_command` builds the argument list, :func:`subprocess_env` the
+environment and :func:`parse_event` reads a line back.
+
+Test hooks (read by this module on the worker, for the fault-tolerance tests only)
+----------------------------------------------------------------------------------
+``RELRAY_TEST_CRASH_FRAME=N``: rendering frame N raises ``RuntimeError`` half-way, every
+time. ``RELRAY_TEST_PAUSE_FRAME=N:FLAG``: the first process to reach the middle of frame
+N writes its process id to the file FLAG (only if FLAG does not exist yet) and sleeps
+up to :data:`PAUSE_SECONDS`, so a test can kill it mid-frame.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import math
+import os
+import sys
+import threading
+import time
+import uuid
+from collections import OrderedDict
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, TextIO
+
+from .. import __version__
+from .errors import UserError
+from .film import Film
+from .job import Job
+from .relativity import ShutterEvent
+from .render import (
+    FramePlan,
+    FrameRenderer,
+    build_renderer,
+    frame_is_done,
+    plan_frames,
+    resolve_camera,
+    write_film,
+)
+
+DEFAULT_SCHEDULER_PORT = 8786
+DEFAULT_CONNECT_TIMEOUT = 10.0
+"""Seconds to reach a ``--scheduler`` before it counts as unreachable (a user error)."""
+STILL_BATCHES = 16
+"""Sample batches of a still (fewer when spp is smaller)."""
+TASK_RETRIES = 1
+"""Extra tries of a task that raised before its frame counts as failed."""
+PAUSE_SECONDS = 60.0
+TEST_CRASH_ENV = "RELRAY_TEST_CRASH_FRAME"
+TEST_PAUSE_ENV = "RELRAY_TEST_PAUSE_FRAME"
+PROGRESS_INTERVAL_S = 0.5
+"""Least time between two JSON ``progress`` events of the local renderer."""
+
+LOOPBACK_NO_DASHBOARD: dict[str, Any] = {"dashboard_address": "127.0.0.1:0",
+                                         "scheduler_kwargs": {"dashboard": False}}
+"""LocalCluster options: the scheduler's HTTP endpoint on a free loopback port, no dashboard."""
+
+
+# ------------------------------------------------------------------------------ reporters
+class Reporter:
+    """Hears a run's events; this base class stays silent (``--quiet``).
+
+    Sub-classes print a tqdm bar (:class:`TqdmReporter`) or JSON lines
+    (:class:`JsonReporter`). ``advance`` may be called from render threads.
+    """
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.t0 = time.perf_counter()
+        self.units = 0
+        self.units_done = 0
+        self.frames_total = 0
+        self.frames_done = 0
+        self.rendered: list[int] = []
+        self.failed: list[int] = []
+        self.finished = False
+
+    def start(self, job: Job, plan: FramePlan, mode: str, units: int, unit: str,
+              scheduler: str | None = None, workers: int | None = None) -> None:
+        self.t0 = time.perf_counter()
+        self.units, self.units_done = int(units), 0
+        self.frames_total = len(plan.todo)
+        self._started(job, plan, mode, unit, scheduler, workers)
+
+    def advance(self, n: int) -> None:
+        with self.lock:
+            self.units_done += int(n)
+            self._advanced(int(n))
+
+    def frame_done(self, frame: int, paths: Sequence[Path | str], seconds: float,
+                   d_range: tuple[float, float] | None = None) -> None:
+        with self.lock:
+            self.frames_done += 1
+            self.rendered.append(frame)
+            self._frame_done(frame, [str(p) for p in paths], seconds, d_range)
+
+    def error(self, frame: int | None, message: str, kind: str = "frame") -> None:
+        with self.lock:
+            if frame is not None:
+                self.failed.append(frame)
+            self._error(frame, message, kind)
+
+    def finish(self, status: str, seconds: float | None = None, exit_code: int = 0) -> None:
+        if self.finished:
+            return
+        self.finished = True
+        took = time.perf_counter() - self.t0 if seconds is None else seconds
+        self._finished(status, took, exit_code)
+
+    @property
+    def fraction(self) -> float:
+        return min(1.0, self.units_done / self.units) if self.units else 1.0
+
+    def eta_seconds(self) -> float | None:
+        f = self.fraction
+        if f <= 0.0 or f >= 1.0:
+            return None if f <= 0.0 else 0.0
+        return (time.perf_counter() - self.t0) * (1.0 - f) / f
+
+    # hooks for sub-classes
+    def _started(self, job, plan, mode, unit, scheduler, workers) -> None:
+        pass
+
+    def _advanced(self, n: int) -> None:
+        pass
+
+    def _frame_done(self, frame, paths, seconds, d_range) -> None:
+        pass
+
+    def _error(self, frame, message, kind) -> None:
+        pass
+
+    def _finished(self, status, seconds, exit_code) -> None:
+        pass
+
+
+def plan_message(plan: FramePlan, out_dir: Path) -> str:
+    """'relray: N done, M to render -> DIR'."""
+    return f"relray: {plan.done} done, {len(plan.todo)} to render -> {out_dir}"
+
+
+class TqdmReporter(Reporter):
+    """"N done, M to render" on stdout, then a tqdm bar (paths locally, frames on Dask)."""
+
+    def __init__(self, stream: TextIO | None = None) -> None:
+        super().__init__()
+        self.stream = stream
+        self.bar = None
+
+    def _started(self, job, plan, mode, unit, scheduler, workers) -> None:
+        from tqdm import tqdm
+
+        where = "" if mode == "local" else f" on {scheduler or f'{workers} local workers'}"
+        print(plan_message(plan, job.output.dir) + where, flush=True)
+        if plan.todo:
+            self.bar = tqdm(total=self.units, unit=unit, unit_scale=unit == "path",
+                            desc="render", dynamic_ncols=True, file=self.stream)
+
+    def _advanced(self, n: int) -> None:
+        if self.bar is not None:
+            self.bar.update(n)
+
+    def _frame_done(self, frame, paths, seconds, d_range) -> None:
+        if self.bar is not None:
+            d = f" D {d_range[0]:.3g}..{d_range[1]:.3g}" if d_range else ""
+            self.bar.set_postfix_str(f"frame {frame}{d}")
+
+    def _error(self, frame, message, kind) -> None:
+        from tqdm import tqdm
+
+        what = f"frame {frame} failed: " if frame is not None else ""
+        tqdm.write(f"relray: error: {what}{message}", file=sys.stderr)
+
+    def _finished(self, status, seconds, exit_code) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+class JsonReporter(Reporter):
+    """One JSON object per line on ``stream`` (stdout): the subprocess contract."""
+
+    def __init__(self, stream: TextIO | None = None,
+                 interval: float = PROGRESS_INTERVAL_S) -> None:
+        super().__init__()
+        self.stream = stream if stream is not None else sys.stdout
+        self.interval = interval
+        self.last_emit = 0.0
+        self.mode, self.unit = "local", "path"
+
+    def emit(self, event: str, **fields: Any) -> None:
+        line = json.dumps({"event": event, **fields}, allow_nan=False, default=str)
+        self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def _progress(self) -> None:
+        self.last_emit = time.perf_counter()
+        eta = self.eta_seconds()
+        self.emit("progress", fraction=round(self.fraction, 6), frames_done=self.frames_done,
+                  frames_total=self.frames_total,
+                  elapsed=round(time.perf_counter() - self.t0, 3),
+                  eta_seconds=None if eta is None else round(eta, 3))
+
+    def _started(self, job, plan, mode, unit, scheduler, workers) -> None:
+        self.mode, self.unit = mode, unit
+        first, last = plan.frames[0], plan.frames[-1]
+        self.emit("start", version=__version__, job=str(job.path), out=str(job.output.dir),
+                  mode=mode, scheduler=scheduler, workers=workers, frames=[first, last],
+                  done=plan.done, to_render=len(plan.todo), todo=[f for f, _ in plan.todo],
+                  unit=unit, units=self.units, message=plan_message(plan, job.output.dir))
+
+    def _advanced(self, n: int) -> None:
+        # paths (local): at most every `interval`; batches: each; frames: after frame_done
+        if self.unit == "batch" or (self.unit == "path" and
+                                    time.perf_counter() - self.last_emit >= self.interval):
+            self._progress()
+
+    def _frame_done(self, frame, paths, seconds, d_range) -> None:
+        main = next((p for p in paths if p.endswith(".exr") and not p.endswith(".spectral.exr")),
+                    paths[0] if paths else None)
+        self.emit("frame_done", frame=frame, path=main, paths=paths, seconds=round(seconds, 4),
+                  fraction=round(self.fraction, 6), frames_done=self.frames_done,
+                  frames_total=self.frames_total)
+        if self.unit != "batch":
+            self._progress()
+
+    def _error(self, frame, message, kind) -> None:
+        self.emit("error", frame=frame, message=message, kind=kind)
+        if frame is not None and self.unit == "frame":
+            self._progress()
+
+    def _finished(self, status, seconds, exit_code) -> None:
+        self.emit("finish", status=status, exit_code=exit_code, rendered=sorted(self.rendered),
+                  failed=sorted(self.failed), seconds=round(seconds, 3))
+
+
+def default_reporter(show_progress: bool = True, json_progress: bool = False) -> Reporter:
+    """The reporter of the CLI's flags: JSON lines, a tqdm bar, or silence."""
+    if json_progress:
+        return JsonReporter()
+    return TqdmReporter() if show_progress else Reporter()
+
+
+def parse_event(line: str) -> dict[str, Any] | None:
+    """One ``--json-progress`` line -> its event dict (None for anything else)."""
+    try:
+        obj = json.loads(line)
+    except (ValueError, TypeError):
+        return None
+    return obj if isinstance(obj, dict) and "event" in obj else None
+
+
+# ------------------------------------------------------------------------------ subprocess contract
+def render_command(job_path: str | Path, *, scheduler: str | None = None,
+                   frames: tuple[int, int] | None = None, overwrite: bool = False,
+                   extra: Sequence[str] = (), python: str | None = None) -> list[str]:
+    """The argument list that renders a job in a child process with JSON progress.
+
+    Runs this installation's CLI module with ``python`` (default: this interpreter; in
+    Blender, ``sys.executable`` is Blender's Python). Use with :func:`subprocess_env`.
+    """
+    module, _ = _cli_module()
+    argv = [python or sys.executable, "-m", module, "render", str(job_path), "--json-progress"]
+    if scheduler:
+        argv += ["--scheduler", scheduler]
+    if frames is not None:
+        argv += ["--frames", f"{int(frames[0])}-{int(frames[1])}"]
+    if overwrite:
+        argv.append("--overwrite")
+    return argv + list(extra)
+
+
+def _cli_module() -> tuple[str, Path | None]:
+    """(the CLI module for ``-m``, a folder the child must import it from, or None)."""
+    if (__package__ or "relray.core").split(".")[0] == "relray":
+        return "relray.core.cli", None  # installed (or editable): importable by name
+    pkg = Path(__file__).resolve().parents[1]  # inside Blender: bl_ext.<repo>.<folder>.core
+    return f"{pkg.name}.core.cli", pkg.parent
+
+
+def subprocess_env(base: dict[str, str] | None = None) -> dict[str, str]:
+    """Environment for :func:`render_command`: this process's import path and BLAS = 1.
+
+    ``PYTHONPATH`` gets every ``sys.path`` entry of this process (inside Blender also the
+    extensions folder that holds this package, and the bundled wheels), so the child
+    imports the same code as its parent.
+    """
+    env = dict(os.environ if base is None else base)
+    _, folder = _cli_module()
+    paths = ([str(folder)] if folder is not None else []) + [p for p in sys.path if p]
+    if env.get("PYTHONPATH"):
+        paths.append(env["PYTHONPATH"])
+    env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(var, "1")
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env
+
+
+# ------------------------------------------------------------------------------ work split
+def sample_batches(spp: int, batches: int = STILL_BATCHES) -> list[tuple[int, int]]:
+    """``min(batches, spp)`` contiguous sample ranges covering [0, spp), sizes within 1."""
+    n = max(1, min(int(batches), int(spp)))
+    bounds = [k * spp // n for k in range(n + 1)]
+    return [(bounds[k], bounds[k + 1]) for k in range(n)]
+
+
+def available_cores() -> int:
+    """CPU cores this process may run on (affinity, e.g. a SLURM cpuset), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def task_threads(requested: int, host_slots: Mapping[str, int] | None = None) -> int:
+    """Render threads of one task: ``requested``, else cores / the task slots of this host.
+
+    The slots are the Dask worker's threads, or, when ``host_slots`` (host -> threads of
+    every worker there, as the client saw the cluster) names this worker's host and says
+    more, that: two workers on one node then share its cores instead of each taking all.
+    """
+    if requested > 0:
+        return requested
+    slots = 1
+    with contextlib.suppress(ImportError, ValueError, AttributeError):
+        from distributed import get_worker
+        from distributed.comm import get_address_host
+
+        worker = get_worker()
+        slots = max(1, int(worker.state.nthreads))
+        if host_slots:
+            slots = max(slots, int(host_slots.get(get_address_host(worker.address), 0)))
+    return max(1, available_cores() // slots)
+
+
+def host_slots(client: Any) -> dict[str, int]:
+    """host -> total Dask worker threads on it, from the scheduler's view of the cluster."""
+    slots: dict[str, int] = {}
+    for info in client.scheduler_info().get("workers", {}).values():
+        host = str(info.get("host", ""))
+        slots[host] = slots.get(host, 0) + int(info.get("nthreads", 1))
+    return slots
+
+
+# ------------------------------------------------------------------------------ worker side
+_RENDERERS: OrderedDict[tuple[str, int], FrameRenderer] = OrderedDict()
+_RENDERERS_LOCK = threading.Lock()
+_KEEP_RENDERERS = 2
+
+
+def worker_renderer(job: Job, run_id: str, threads: int) -> FrameRenderer:
+    """This process's renderer of run ``run_id`` (built once: scene, BVH, tables)."""
+    key = (run_id, int(threads))
+    with _RENDERERS_LOCK:
+        renderer = _RENDERERS.get(key)
+        if renderer is None:
+            renderer = build_renderer(job, threads=threads)
+            _RENDERERS[key] = renderer
+            while len(_RENDERERS) > _KEEP_RENDERERS:
+                _RENDERERS.popitem(last=False)
+        else:
+            _RENDERERS.move_to_end(key)
+        return renderer
+
+
+def _test_hook(frame: int, total: int) -> Callable[[int], None] | None:
+    """The progress callback of the test hooks (module docstring), or None."""
+    crash = os.environ.get(TEST_CRASH_ENV, "").strip()
+    pause = os.environ.get(TEST_PAUSE_ENV, "").strip()
+    crash_frame = int(crash) if crash else None
+    pause_frame, _, flag = pause.partition(":")
+    if crash_frame != frame and (not pause_frame or int(pause_frame) != frame):
+        return None
+    seen = [0]
+    fired = [False]
+
+    def hook(n: int) -> None:
+        seen[0] += n
+        if fired[0] or 2 * seen[0] < total:
+            return
+        fired[0] = True
+        if crash_frame == frame:
+            raise RuntimeError(f"{TEST_CRASH_ENV}: frame {frame} crashes (test hook)")
+        flag_path = Path(flag)
+        if flag and not flag_path.exists():
+            tmp = flag_path.with_name(flag_path.name + f".{os.getpid()}")
+            tmp.write_text(str(os.getpid()))
+            os.replace(tmp, flag_path)
+            time.sleep(PAUSE_SECONDS)
+
+    return hook
+
+
+def _frame_files(job: Job, frame: int) -> list[str]:
+    from .imageio import frame_paths
+
+    paths = frame_paths(job.output.dir, job.output.name.format(frame=frame))
+    return [str(paths[f]) for f in job.output.formats]
+
+
+def render_frame_task(job: Job, run_id: str, frame: int, event: ShutterEvent, threads: int,
+                      overwrite: bool, slots: Mapping[str, int] | None = None
+                      ) -> dict[str, Any]:
+    """Worker: render one frame and write its files; returns paths and timings."""
+    if not overwrite and frame_is_done(job, frame, event):
+        return {"frame": frame, "paths": _frame_files(job, frame), "seconds": 0.0,
+                "d_range": None, "skipped": True}
+    renderer = worker_renderer(job, run_id, task_threads(threads, slots))
+    s = job.render
+    film, stats = renderer.render(event, frame,
+                                  progress=_test_hook(frame, s.width * s.height * s.spp))
+    d_range = (stats.d_min, stats.d_max)
+    paths = write_film(job, frame, event, film, renderer.to_rgb, stats.seconds, d_range)
+    return {"frame": frame, "paths": [str(p) for p in paths], "seconds": stats.seconds,
+            "d_range": d_range, "skipped": False}
+
+
+def render_batch_task(job: Job, run_id: str, frame: int, event: ShutterEvent, threads: int,
+                      samples: tuple[int, int], slots: Mapping[str, int] | None = None
+                      ) -> tuple[Film, float, float, float]:
+    """Worker: render the samples [s0, s1) of a frame; returns (film, seconds, D min, D max)."""
+    renderer = worker_renderer(job, run_id, task_threads(threads, slots))
+    s = job.render
+    hook = _test_hook(frame, s.width * s.height * (samples[1] - samples[0]))
+    film, stats = renderer.render(event, frame, progress=hook, samples=samples)
+    return film, stats.seconds, stats.d_min, stats.d_max
+
+
+# ------------------------------------------------------------------------------ client side
+@dataclass
+class FarmResult:
+    """What a Dask run did: files written, frames rendered, frames failed (with why)."""
+
+    written: list[Path] = field(default_factory=list)
+    rendered: list[int] = field(default_factory=list)
+    failed: dict[int, str] = field(default_factory=dict)
+    skipped: int = 0
+
+
+def scheduler_address(text: str) -> str:
+    """'HOST', 'HOST:PORT' or 'tcp://HOST:PORT' -> 'tcp://HOST:PORT' (user error if bad)."""
+    raw = text.strip()
+    scheme, sep, rest = raw.partition("://")
+    if not sep:
+        scheme, rest = "tcp", raw
+    host, colon, port = rest.rpartition(":")
+    if not colon or "]" in port:  # no port given (an IPv6 host keeps its colons)
+        host, port = rest, str(DEFAULT_SCHEDULER_PORT)
+    if scheme not in ("tcp", "tls", "ucx", "ws", "wss") or not host or not port.isdigit() \
+            or not 0 < int(port) < 65536:
+        raise UserError(f"expected tcp://HOST:PORT, got {text!r}", key="--scheduler")
+    return f"{scheme}://{host}:{port}"
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None = None, workers: int = 0,
+                timeout: float = DEFAULT_CONNECT_TIMEOUT,
+                job_path: Path | None = None) -> Iterator[Any]:
+    """A Dask client: of ``scheduler``, else of a LocalCluster of ``workers`` processes.
+
+    The LocalCluster binds to 127.0.0.1 only, with one thread per worker and no
+    dashboard. An unreachable scheduler is a :class:`UserError` (key ``--scheduler``).
+    """
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        address = scheduler_address(scheduler)
+        try:
+            client = Client(address, timeout=timeout, set_as_default=False)
+        except Exception as exc:  # OSError, TimeoutError, ValueError from the comm layer
+            detail = " ".join(str(exc).split()) or type(exc).__name__
+            raise UserError(f"cannot reach the Dask scheduler {address}: {detail}",
+                            key="--scheduler", file=job_path) from None
+        try:
+            client.wait_for_workers(1, timeout=timeout)
+        except Exception:
+            client.close()
+            raise UserError(f"no Dask worker joined the scheduler {address} within "
+                            f"{timeout:g} s (start one: dask worker {address} --nthreads 1)",
+                            key="--scheduler", file=job_path) from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    if workers < 1:
+        raise UserError(f"need at least 1 worker, got {workers}", key="--workers",
+                        file=job_path)
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           host="127.0.0.1", scheduler_port=0, **LOOPBACK_NO_DASHBOARD,
+                           silence_logs=logging.ERROR)
+    try:
+        client = Client(cluster, set_as_default=False)
+        try:
+            yield client
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def _message(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
+                   reporter: Reporter | None = None, threads: int = 0,
+                   batches: int = STILL_BATCHES, scheduler: str | None = None,
+                   workers: int | None = None) -> FarmResult:
+    """Render the job's frames that are not done on the cluster of ``client``.
+
+    ``threads`` is each task's render threads (0: the worker decides, see
+    :func:`task_threads`). Frames fail alone: see :class:`FarmResult`.
+    """
+    from .scene import build_scene
+
+    reporter = reporter if reporter is not None else Reporter()
+    resolve_camera(job, build_scene(job))  # user errors here, before any task
+    plan = plan_frames(job, overwrite)
+    threads = threads or job.render.threads
+    run_id = uuid.uuid4().hex
+    result = FarmResult(skipped=plan.done)
+    adaptive = job.render.noise_threshold > 0.0  # adaptive sampling needs the whole frame
+    if len(plan.todo) == 1 and min(batches, job.render.spp) > 1 and not adaptive:
+        ranges = sample_batches(job.render.spp, batches)
+        reporter.start(job, plan, "dask", len(ranges), "batch", scheduler, workers)
+        _render_still(job, client, plan.todo[0], ranges, run_id, threads, reporter, result)
+    else:
+        reporter.start(job, plan, "dask", len(plan.todo), "frame", scheduler, workers)
+        _render_frames(job, client, plan.todo, run_id, threads, overwrite, reporter, result)
+    return result
+
+
+def _render_frames(job: Job, client: Any, todo: list[tuple[int, ShutterEvent]], run_id: str,
+                   threads: int, overwrite: bool, reporter: Reporter,
+                   result: FarmResult) -> None:
+    from distributed import as_completed
+
+    slots = host_slots(client)
+    frame_of: dict[str, int] = {}
+    futures = []
+    for i, (frame, ev) in enumerate(todo):
+        key = f"relray-frame-{frame}-{run_id}"
+        frame_of[key] = frame
+        futures.append(client.submit(render_frame_task, job, run_id, frame, ev, threads,
+                                     overwrite, slots, key=key, pure=False, retries=TASK_RETRIES,
+                                     priority=-i))
+    pending = as_completed(futures, loop=client.loop)
+    del futures
+    try:
+        for fut in pending:
+            frame = frame_of[fut.key]
+            try:
+                out = fut.result()
+            except Exception as exc:
+                result.failed[frame] = _message(exc)
+                reporter.advance(1)
+                reporter.error(frame, result.failed[frame])
+                continue
+            finally:
+                fut.release()
+            result.written += [Path(p) for p in out["paths"]]
+            result.rendered.append(frame)
+            reporter.advance(1)
+            reporter.frame_done(frame, out["paths"], out["seconds"], out["d_range"])
+    except BaseException:
+        client.cancel(list(pending.futures))
+        raise
+
+
+def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
+                  ranges: list[tuple[int, int]], run_id: str, threads: int,
+                  reporter: Reporter, result: FarmResult) -> None:
+    from distributed import as_completed
+
+    from .spectrum import sensor_to_rgb
+
+    slots = host_slots(client)
+    frame, ev = todo
+    t0 = time.perf_counter()
+    index: dict[str, int] = {}
+    futures = []
+    for k, r in enumerate(ranges):
+        key = f"relray-still-{frame}-{r[0]}-{r[1]}-{run_id}"
+        index[key] = k
+        futures.append(client.submit(render_batch_task, job, run_id, frame, ev, threads, r,
+                                     slots, key=key, pure=False, retries=TASK_RETRIES, priority=-k))
+    pending = as_completed(futures, loop=client.loop)
+    del futures
+    arrived: dict[int, tuple[Film, float, float, float]] = {}
+    merged: Film | None = None
+    next_k = 0
+    d_min, d_max = math.inf, 0.0
+    try:
+        for fut in pending:
+            try:
+                arrived[index[fut.key]] = fut.result()
+            except Exception as exc:
+                client.cancel(list(pending.futures))
+                result.failed[frame] = f"sample batch {ranges[index[fut.key]]}: {_message(exc)}"
+                reporter.error(frame, result.failed[frame])
+                return
+            finally:
+                fut.release()
+            reporter.advance(1)
+            while next_k in arrived:  # merge in batch order: the same sums for any workers
+                film, _, lo, hi = arrived.pop(next_k)
+                d_min, d_max = min(d_min, lo), max(d_max, hi)
+                if merged is None:
+                    merged = film
+                else:
+                    merged.merge(film)
+                next_k += 1
+    except BaseException:
+        client.cancel(list(pending.futures))
+        raise
+    seconds = time.perf_counter() - t0
+    paths = write_film(job, frame, ev, merged, sensor_to_rgb(job.render.spectral), seconds,
+                       (d_min, d_max))
+    result.written += paths
+    result.rendered.append(frame)
+    reporter.frame_done(frame, paths, seconds, (d_min, d_max))
+
+
+def render(job: Job, *, scheduler: str | None = None, workers: int = 0,
+           overwrite: bool = False, reporter: Reporter | None = None,
+           batches: int = STILL_BATCHES, connect_timeout: float = DEFAULT_CONNECT_TIMEOUT
+           ) -> FarmResult:
+    """The CLI's farm entry: a ``--scheduler`` or ``--workers N`` run, reported to the end.
+
+    Each task renders with the cores of its host divided among the worker threads there
+    (:func:`task_threads`), unless the job sets ``render.threads``.
+    """
+    reporter = reporter if reporter is not None else Reporter()
+    t0 = time.perf_counter()
+    with dask_client(scheduler, workers, connect_timeout, job.path) as client:
+        n_workers = len(client.scheduler_info().get("workers", {})) if scheduler else workers
+        result = render_on_dask(job, client, overwrite=overwrite, reporter=reporter,
+                                threads=job.render.threads, batches=batches,
+                                scheduler=scheduler_address(scheduler) if scheduler else None,
+                                workers=n_workers)
+        status = "failed" if result.failed else "ok"
+        reporter.finish(status, time.perf_counter() - t0, 1 if result.failed else 0)
+    return result
+
+
+def with_render_threads(job: Job, threads: int) -> Job:
+    """The job with ``render.threads`` replaced (tests, benchmarks)."""
+    return replace(job, render=replace(job.render, threads=int(threads)))
+
+
+__all__ = [
+    "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "JsonReporter", "Reporter",
+    "TqdmReporter", "available_cores", "dask_client", "default_reporter", "parse_event",
+    "render", "render_batch_task", "render_command", "render_frame_task", "render_on_dask",
+    "host_slots", "sample_batches", "scheduler_address", "subprocess_env", "task_threads",
+    "with_render_threads", "worker_renderer",
+]
