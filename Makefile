@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 
-.PHONY: venv demo test lint stress bench bench-quick clean gallery
+.PHONY: venv demo test lint stress bench bench-quick clean gallery extension test-blender
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,17 +21,49 @@ demo: $(STAMP)
 	@echo "frames:        $(CURDIR)/out/flyby/"
 	@echo "contact sheet: $(CURDIR)/out/flyby_contact_sheet.png"
 
-## make test: lint and the whole test suite
+## make test: lint and the whole test suite (tests/blender included: the add-on's tests
+## run under the bpy module in one child process, see tests/blender/test_bpy_module.py)
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
 
+## make test-blender: the same tests/blender files under a real `blender -b` (Debian
+## trixie's Blender 4.3 with Python 3.13, in a debootstrap chroot cached in
+## ~/.cache/relray; needs root; about 3 minutes and 2.5 GB the first time)
+test-blender: $(STAMP)
+	tests/blender/real_blender.sh all
+
+## make extension: the Blender extension zips in dist/ (linux-x64, macos-arm64,
+## windows-x64, each with its platform's wheels of the core's dependencies), built and
+## validated with Blender's extension CLI from the bpy module
+extension: $(STAMP)
+	$(BIN)/python relblend/packaging.py build dist
+
 lint: $(STAMP)
 	$(BIN)/ruff check .
+
+## make stress: the stress suite's long variants (about 5 minutes on 2 cores): the full
+## render grid, 5000-example fuzzers, every malformed job through a real process and the
+## 1920x1080 memory bound (measured with /usr/bin/time -v; apt-get install time if missing)
+stress: $(STAMP)
+	@test -x /usr/bin/time || echo "note: /usr/bin/time missing, memory read with getrusage"
+	RELRAY_STRESS=1 $(BIN)/python -m pytest -q -m stress -s -p no:cacheprovider
 
 ## make gallery: the seed report's figures, rendered into docs/gallery
 gallery: $(STAMP)
 	$(BIN)/python docs/gallery.py
+
+## make bench: the benchmark suite (about an hour on 2 cores): bench/results/*.csv and
+## plots, bench/RESULTS.md; installs bpy 5.0.1 (Cycles, the anchor) if it is missing
+bench: $(STAMP)
+	$(BIN)/python -c "import bpy" 2>/dev/null || \
+		$(BIN)/python -m pip install --quiet --disable-pip-version-check "bpy==5.0.1"
+	$(BIN)/python -m relray.bench.run
+
+## make bench-quick: the same at small sizes in under 3 minutes (bench/results/quick/);
+## the Cycles series only if bpy is already installed
+bench-quick: $(STAMP)
+	$(BIN)/python -m relray.bench.run --quick
 
 clean:
 	rm -rf out .cache .pytest_cache

@@ -197,10 +197,6 @@ def cmd_info(args: argparse.Namespace) -> int:
     job = load_with_overrides(args)
     print(jobmod.job_summary(job))
     cam = camera_settings(job)
-    if cam is None:
-        from .scene import build_scene
-
-        cam = build_scene(job).camera
     pin = PinholeCamera.from_settings(cam, job.render.width, job.render.height)
     cols, rows = np.meshgrid(np.linspace(0, job.render.width, 33),
                              np.linspace(0, job.render.height, 33))

@@ -85,8 +85,20 @@ def frame_events(job: Job) -> list[tuple[int, relativity.ShutterEvent]]:
 
 
 def camera_settings(job: Job):
-    """The job's camera, else the glTF's first camera."""
-    return job.camera
+    """The job's [camera], else the glTF file's first camera (read from its JSON only).
+
+    Raises a UserError naming ``camera`` when there is neither.
+    """
+    from .errors import UserError
+    from .gltf import find_camera
+
+    cam = job.camera
+    if cam is None and job.scene.file is not None:
+        cam = find_camera(job.scene.file, job_file=job.path)
+    if cam is None:
+        raise UserError("no camera: add a [camera] table or a camera to the glTF file",
+                        key="camera", file=job.path)
+    return cam
 
 
 ADAPTIVE_FIRST_PASS = 8
@@ -268,14 +280,8 @@ def frame_is_done(job: Job, frame: int, event: relativity.ShutterEvent) -> bool:
 
 
 def resolve_camera(job: Job, scene: Scene):
-    """The job's [camera], else the glTF's first camera, else a clear error."""
-    from .errors import UserError
-
-    cam = job.camera or scene.camera
-    if cam is None:
-        raise UserError("no camera: add a [camera] table or a camera to the glTF file",
-                        key="camera", file=job.path)
-    return cam
+    """The job's [camera], else the built scene's (glTF) camera, else a clear error."""
+    return job.camera or scene.camera or camera_settings(job)
 
 
 def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,

@@ -1,9 +1,47 @@
-"""The Blender add-on (see the add-on issue).  Nothing is registered yet."""
+"""relblend: the Blender add-on of relray (a thin layer, one job per file).
+
+==================  ===================================================================
+module              owns
+==================  ===================================================================
+``properties``      the data: camera Relativity settings, scene render settings, passes
+``ui``              panels, and Blender's panels reused through COMPAT_ENGINES
+``operators``       velocity keyframe, motion presets, export for farm
+``engine``          the "Relativistic" RenderEngine (bl_idname "RELRAY"): hands off to
+                    the core
+``export``          depsgraph → core Scene (pure numpy out of bpy)
+``motion``          β and shutter events per frame (snapshot / worldline)
+``farm``            scene.glb + job TOML for ``relray render``
+``presets``         the TOML motion profiles of presets/motion
+``packaging``       building the extension zips (a tool for make; not loaded by Blender)
+==================  ===================================================================
+
+Blender installs the extension as ``bl_ext.<repository>.relray``; everything here uses
+relative imports, and the core (``from ..core import ...``) is imported lazily, when a
+frame is rendered or exported, so registering is quick and never needs the wheels.
+"""
+
+from __future__ import annotations
+
+_modules = None
+
+
+def _load():
+    from . import engine, operators, properties, ui
+
+    return (properties, operators, ui, engine)
 
 
 def register() -> None:
-    raise RuntimeError("the relblend add-on is not built yet; see the add-on issue")
+    """Register properties, operators, panels and the engine (in that order)."""
+    global _modules
+    _modules = _load()
+    for module in _modules:
+        module.register()
 
 
 def unregister() -> None:
-    pass
+    """Unregister everything register() registered, in reverse order."""
+    global _modules
+    for module in reversed(_modules or _load()):
+        module.unregister()
+    _modules = None

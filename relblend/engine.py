@@ -1,0 +1,375 @@
+"""The "Relativistic" render engine: hands the evaluated scene to the core.
+
+One frame, in order:
+
+1. **Motion** (:mod:`.motion`): the camera's lab β of this frame (a clear error naming
+   the frame when |β| >= 1) and its shutter event. In worldline mode the β of every
+   frame from the scene's start frame on is needed: the engine evaluates earlier
+   frames with ``RenderEngine.frame_set`` (so keyframes, F-curve modifiers, drivers,
+   parents and constraints all count) and keeps them for the rest of the render job.
+2. **Export** (:mod:`.export`): the depsgraph at this frame → a core ``Scene``.
+3. **Prepare**: ``core.render.prepare`` (BVH, spectral tables, lights); reused while the
+   exported scene stays byte-for-byte the same (a static scene in an animation).
+4. **Render**: ``core.render.FrameRenderer.render`` runs in a worker thread; this thread
+   polls ``test_break`` every 0.1 s (the core checks the cancel flag between wavefronts),
+   and shows progress and a stats line: frame, spp, γ, the D range of the view.
+5. **Result**: Combined (RGBA), Depth (Z), Doppler (D) and LabTime (T) passes, flipped
+   to Blender's bottom-up rows. Blender then applies its view transform and writes the
+   output format. With a transparent film, pixels no primary ray hit are transparent
+   black; otherwise alpha is 1.
+
+User errors (|β| >= 1, no camera, an orthographic camera, ...) are reported with
+``report({'ERROR'}, ...)``: that stops the render (and an animation at that frame) and
+makes ``bpy.ops.render.render`` raise ``RuntimeError`` with the message.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+#: Passes: name -> (channels, channel ids, type).
+PASSES = {
+    "Combined": (4, "RGBA", "COLOR"),
+    "Depth": (1, "Z", "VALUE"),
+    "Doppler": (1, "D", "VALUE"),
+    "LabTime": (1, "T", "VALUE"),
+}
+#: Seconds between test_break / progress polls while the core renders.
+POLL_SECONDS = 0.1
+#: Polled together with ``test_break``: a script (or a test) can stop a render from
+#: Python, which cannot press Esc in background mode. None, or a callable -> bool.
+SCRIPT_CANCEL = None
+
+# β (lab) of already evaluated frames, per render job: {(scene, camera): {frame: β}},
+# plus the worldline clock's inputs; cleared when a render job starts or ends.
+_HISTORY: dict[tuple[str, str], dict[int, np.ndarray]] = {}
+_CLOCK: dict[tuple[str, str], tuple[float, float]] = {}
+# The last prepared scene: (content hash, PreparedScene).
+_PREPARED: list[tuple[str, object]] = []
+
+#: The last frames rendered in this Blender session, by frame number (at most
+#: :data:`RESULTS_KEPT`, default the last one only: images are big): the core's resolved
+#: image (row 0 = top), its AOVs, the shutter event and timings. For tests and scripts;
+#: Blender's own result is the render result.
+RESULTS: dict[int, dict] = {}
+RESULTS_KEPT = 1
+
+
+@bpy.app.handlers.persistent
+def clear_caches(*_args) -> None:
+    """Forget the motion history and the prepared scene (render job boundaries)."""
+    _HISTORY.clear()
+    _CLOCK.clear()
+
+
+def free_prepared() -> None:
+    _PREPARED.clear()
+
+
+class RenderFailed(Exception):  # noqa: N818 - a signal to stop, shown as is
+    """A user error that stops the render; the message is shown as is."""
+
+
+@dataclass
+class FrameSetup:
+    """Everything the core needs for one frame."""
+
+    frame: int
+    event: object  # core.relativity.ShutterEvent
+    exported: object  # export.ExportedScene
+    gamma: float
+
+
+class RelrayRenderEngine(bpy.types.RenderEngine):
+    """Blender's entry point: F12, animations, ``blender -b file -E RELRAY -f 1`` / ``-a``."""
+
+    bl_idname = "RELRAY"
+    bl_label = "Relativistic"
+    bl_use_preview = False
+    bl_use_postprocess = True
+    bl_use_eevee_viewport = True
+    bl_use_shading_nodes_custom = False
+
+    # ------------------------------------------------------------------ passes
+    def update_render_passes(self, scene=None, renderlayer=None):
+        for name in enabled_passes(renderlayer):
+            channels, chan_id, kind = PASSES[name]
+            self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
+
+    # ------------------------------------------------------------------ render
+    def render(self, depsgraph):
+        try:
+            self._render(depsgraph)
+        except RenderFailed as e:
+            self._fail(str(e))
+        except ImportError as e:
+            self._fail(f"the render core cannot be loaded ({e}); install the "
+                       "extension zip built for this platform (it bundles the core's wheels)")
+
+    def _fail(self, message: str) -> None:
+        print(f"relray: error: {message}", flush=True)
+        self.error_set(message)
+        self.report({"ERROR"}, message)
+
+    def _render(self, depsgraph) -> None:
+        from ..core.errors import UserError
+        from .export import ExportError
+        from .motion import MotionError
+
+        try:
+            setup = self._setup(depsgraph)
+        except (MotionError, ExportError, UserError) as e:
+            raise RenderFailed(str(e)) from None
+        except InterruptedError:  # cancelled while exporting
+            return
+        for message in setup.exported.warnings.messages:
+            print(f"relray: warning: {message}", flush=True)
+            self.report({"WARNING"}, message)
+        self._render_frame(depsgraph, setup)
+
+    def _setup(self, depsgraph) -> FrameSetup:
+        from . import export, motion
+
+        scene = depsgraph.scene
+        frame = scene.frame_current
+        cam = self.camera_override or scene.camera
+        if cam is None:
+            raise export.ExportError("the scene has no active camera")
+        cam_eval = cam.evaluated_get(depsgraph)
+        if cam_eval.type != "CAMERA":
+            raise export.ExportError(f"the active camera '{cam.name}' is not a camera object")
+        settings = cam_eval.data.relray
+        m = export.matrix_np(cam_eval.matrix_world)
+        beta = motion.check_speed(
+            motion.beta_lab(motion.VelocitySettings.from_rna(settings),
+                            motion.unit_rotation(m[:3, :3])), frame)
+        position = m[:3, 3].copy()
+        if settings.mode == "WORLDLINE":
+            betas, clock = self._worldline_history(depsgraph, cam, frame)
+            betas[frame] = beta
+            event = motion.worldline_event(position, betas, clock, frame)
+        else:
+            event = motion.snapshot_event(position, beta, float(settings.ct), frame)
+        exported = export.export_scene(depsgraph, cam, self.resolution_x, self.resolution_y,
+                                       test_break=self.test_break)
+        return FrameSetup(frame, event, exported, motion.gamma_of(event.beta))
+
+    def _worldline_history(self, depsgraph, cam, frame: int):
+        """β (lab) of frames min(start, frame) .. frame - 1, and the worldline clock."""
+        from . import export, motion
+
+        scene = depsgraph.scene
+        start = scene.frame_start
+        key = (scene.name, cam.name)
+        history = _HISTORY.setdefault(key, {})
+        needed = [f for f in range(min(start, frame), frame) if f not in history]
+        if start == frame:  # this frame's values are the clock's
+            settings = cam.evaluated_get(depsgraph).data.relray
+            _CLOCK[key] = (float(settings.ct), float(settings.ct_per_frame))
+        elif key not in _CLOCK and start not in needed:
+            needed.append(start)  # rendering before the start frame: visit it too
+        if needed:
+            try:
+                for f in needed:
+                    self.frame_set(f, 0.0)
+                    cam_eval = cam.evaluated_get(depsgraph)
+                    m = export.matrix_np(cam_eval.matrix_world)
+                    settings = cam_eval.data.relray
+                    history[f] = motion.check_speed(motion.beta_lab(
+                        motion.VelocitySettings.from_rna(settings),
+                        motion.unit_rotation(m[:3, :3])), f)
+                    if f == start:
+                        _CLOCK[key] = (float(settings.ct), float(settings.ct_per_frame))
+            finally:
+                self.frame_set(frame, 0.0)
+        ct0, per_frame = _CLOCK[key]
+        clock = motion.WorldlineClock(start, ct0, per_frame).check()
+        return dict(history), clock
+
+    def _render_frame(self, depsgraph, setup: FrameSetup) -> None:
+        from ..core import render as core_render
+        from ..core.camera import PinholeCamera
+        from ..core.job import RenderSettings
+        from .motion import view_doppler_range
+
+        scene = depsgraph.scene
+        rs = scene.relray
+        ex = setup.exported
+        w, h = ex.width, ex.height
+        threads = rs.threads or scene.render.threads
+        settings = RenderSettings(width=w, height=h, spp=rs.samples, max_depth=rs.max_depth,
+                                  seed=rs.seed, spectral=rs.spectral, doppler=rs.doppler,
+                                  searchlight=rs.searchlight, threads=threads)
+        layer = depsgraph.view_layer
+        passes = enabled_passes(layer)
+        aovs = tuple(a for p, a in (("Depth", "depth"), ("Doppler", "doppler"),
+                                    ("LabTime", "lab_time")) if p in passes)
+        self.update_stats("", f"Frame {setup.frame} | preparing")
+        t_prep = time.perf_counter()
+        prep = prepared_scene(ex.scene, rs.spectral)
+        t_prep = time.perf_counter() - t_prep
+        if self.test_break():
+            return
+        renderer = core_render.FrameRenderer(prep, settings,
+                                             PinholeCamera.from_settings(ex.camera, w, h),
+                                             aovs=aovs)
+        d_lo, d_hi = view_doppler_range(ex.camera, setup.event.beta, w, h)
+        head = (f"Frame {setup.frame} | {rs.samples} spp | γ {setup.gamma:.4f} | "
+                f"D {d_lo:.3f}–{d_hi:.3f}")
+        film, stats = self._run_cancellable(renderer, setup, w * h * rs.samples, head)
+        if film is None:
+            self.update_stats("", f"{head} | cancelled")
+            return
+        image = film.resolve(renderer.to_rgb)
+        self._write_result(image, passes, scene.render.film_transparent, w, h)
+        _keep_result(setup, image, stats, t_prep)
+        print(f"relray: frame {setup.frame}: {w}x{h}, {rs.samples} spp, γ {setup.gamma:.6g}, "
+              f"D {stats.d_min:.4g}..{stats.d_max:.4g}, β {np.round(setup.event.beta, 6)}, "
+              f"ct' {setup.event.tau:.6g}, export {ex.seconds * 1000:.1f} ms, render "
+              f"{stats.seconds:.2f} s", flush=True)
+        self.update_stats("", f"Frame {setup.frame} | {rs.samples} spp | γ {setup.gamma:.4f} | "
+                              f"D {stats.d_min:.3f}–{stats.d_max:.3f} | {stats.seconds:.2f} s")
+
+    def _run_cancellable(self, renderer, setup: FrameSetup, total: int, head: str):
+        """Render in a worker thread; poll test_break and show progress from this one."""
+        from ..core.render import RenderCancelled
+
+        done = [0]
+        lock = threading.Lock()
+        stop = threading.Event()
+        out: dict[str, object] = {}
+
+        def progress(n: int) -> None:
+            with lock:
+                done[0] += n
+
+        def work() -> None:
+            try:
+                out["result"] = renderer.render(setup.event, setup.frame, progress=progress,
+                                                cancel=stop.is_set)
+            except RenderCancelled:
+                out["cancelled"] = True
+            except BaseException as e:  # noqa: BLE001 - re-raised in this thread
+                out["error"] = e
+
+        worker = threading.Thread(target=work, name="relray-render", daemon=True)
+        t0 = time.perf_counter()
+        worker.start()
+        while worker.is_alive():
+            worker.join(POLL_SECONDS)
+            if not stop.is_set() and (self.test_break()
+                                      or (SCRIPT_CANCEL is not None and SCRIPT_CANCEL())):
+                stop.set()
+                out["cancel_requested_at"] = time.perf_counter()
+            with lock:
+                frac = done[0] / total if total else 1.0
+            self.update_progress(min(frac, 1.0))
+            self.update_stats("", f"{head} | {100 * frac:.0f}% | "
+                                  f"{time.perf_counter() - t0:.1f} s")
+        if "cancel_requested_at" in out:
+            global LAST_CANCEL_LATENCY
+            LAST_CANCEL_LATENCY = time.perf_counter() - out["cancel_requested_at"]
+        if "error" in out:
+            raise out["error"]
+        if "result" not in out:
+            return None, None
+        return out["result"]
+
+    def _write_result(self, image, passes: list[str], transparent: bool, w: int, h: int):
+        """Fill the render result; rows flipped (Blender's row 0 is the bottom)."""
+        rgba = np.array(image.rgba[::-1], np.float32)
+        if transparent:
+            rgba[rgba[..., 3] <= 0.0, :3] = 0.0
+        else:
+            rgba[..., 3] = 1.0
+        result = self.begin_result(0, 0, w, h)
+        layer = result.layers[0]
+        layer.passes["Combined"].rect = rgba.reshape(-1, 4)
+        for name, aov in (("Depth", "depth"), ("Doppler", "doppler"), ("LabTime", "lab_time")):
+            if name in passes:
+                plane = np.array(image.aovs[aov][::-1], np.float32).reshape(-1, 1)
+                layer.passes[name].rect = plane
+        self.end_result(result)
+
+
+def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float) -> None:
+    RESULTS.pop(setup.frame, None)  # re-inserted last
+    RESULTS[setup.frame] = {
+        "frame": setup.frame, "rgba": image.rgba, "aovs": image.aovs, "event": setup.event,
+        "gamma": setup.gamma, "d_range": (stats.d_min, stats.d_max),
+        "export_seconds": setup.exported.seconds, "prepare_seconds": prepare_seconds,
+        "render_seconds": stats.seconds, "warnings": list(setup.exported.warnings.messages),
+        "triangles": len(setup.exported.scene.triangles),
+    }
+    while len(RESULTS) > RESULTS_KEPT:
+        RESULTS.pop(next(iter(RESULTS)))
+
+
+#: Seconds from a test_break request to the core stopping, in the last cancelled render.
+LAST_CANCEL_LATENCY: float | None = None
+
+
+def enabled_passes(view_layer) -> list[str]:
+    """The passes a view layer asks for (Combined always)."""
+    names = ["Combined"]
+    if view_layer is None:
+        return names
+    if view_layer.use_pass_z:
+        names.append("Depth")
+    settings = getattr(view_layer, "relray", None)
+    if settings is None or settings.use_pass_doppler:
+        names.append("Doppler")
+    if settings is None or settings.use_pass_lab_time:
+        names.append("LabTime")
+    return names
+
+
+def scene_hash(scene, mode: str) -> str:
+    """A content hash of an exported core Scene (geometry, materials, lights, sky)."""
+    h = hashlib.blake2b(digest_size=16)
+    for a in (scene.triangles, scene.normals, scene.material_ids, scene.background):
+        if a is not None:
+            h.update(np.ascontiguousarray(a).tobytes())
+    h.update(repr(scene.materials).encode())
+    for light in scene.lights:
+        h.update(repr(light).encode())
+        for a in (light.position, light.direction, light.color):
+            h.update(np.ascontiguousarray(a).tobytes())
+    h.update(mode.encode())
+    return h.hexdigest()
+
+
+def prepared_scene(scene, mode: str):
+    """core.render.prepare, reused while the exported scene is unchanged."""
+    from ..core import render as core_render
+
+    key = scene_hash(scene, mode)
+    if _PREPARED and _PREPARED[0][0] == key:
+        return _PREPARED[0][1]
+    prep = core_render.prepare(scene, mode)
+    _PREPARED[:] = [(key, prep)]
+    return prep
+
+
+def register() -> None:
+    bpy.utils.register_class(RelrayRenderEngine)
+    for handlers in (bpy.app.handlers.render_init, bpy.app.handlers.render_complete,
+                     bpy.app.handlers.render_cancel):
+        if clear_caches not in handlers:
+            handlers.append(clear_caches)
+
+
+def unregister() -> None:
+    for handlers in (bpy.app.handlers.render_init, bpy.app.handlers.render_complete,
+                     bpy.app.handlers.render_cancel):
+        while clear_caches in handlers:
+            handlers.remove(clear_caches)
+    clear_caches()
+    free_prepared()
+    bpy.utils.unregister_class(RelrayRenderEngine)

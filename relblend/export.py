@@ -1,0 +1,659 @@
+"""Blender → core: numpy arrays and core specs out of an evaluated depsgraph.
+
+Nothing of bpy leaks into the core: meshes leave as float64 arrays (through
+``foreach_get`` into preallocated buffers), materials as
+:class:`relray.core.job.MaterialSpec`, lights as :class:`relray.core.job.LightSpec`,
+the camera as :class:`relray.core.job.CameraSettings`, and the whole scene as a
+:class:`relray.core.scene.Scene`.
+
+What is exported, and how
+-------------------------
+
+=======================  ==================================================================
+Blender                  core
+=======================  ==================================================================
+mesh, curve, text,       ``to_mesh()`` of the evaluated object (modifiers applied, the
+surface, metaball        render depsgraph's levels), always released again
+                         (:func:`evaluated_mesh`); loop triangles, corner normals
+instances                ``depsgraph.object_instances`` (collection instances, geometry
+                         nodes, particles): each mesh is read once and placed by every
+                         instance's world matrix (copied inside the loop: instance items
+                         die after each step)
+Principled BSDF          base colour, metallic, roughness, transmission weight, IOR,
+                         emission colour × strength
+Emission shader          black base colour, emission colour × strength
+Blackbody node           into an emission colour: ``emission_blackbody`` (K); Blender's
+                         node is normalised to luminance 1, as the core's emitter is
+Diffuse / Glossy /       roughness 1 / metallic 1 / transmission 1 (a convenience)
+Glass BSDF
+Image Texture            on a colour input: the image's mean linear colour (the core has
+                         no textures yet), with a warning
+other nodes              the socket's own value, or the viewport display colour, with a
+                         warning listed once per material
+point / spot / sun       position, direction (-Z), colour, power in Blender's units (W;
+light                    sun: W/m²) × 2^exposure, radius, spot size and blend; colour ×
+                         the blackbody colour when "temperature" is used
+area light               an emissive one-sided quad with the object's exact transform,
+                         radiance L = P / (π A) (as the core does for [[lights]] area);
+                         disk and ellipse become the rectangle of the same area (warned)
+world                    Background colour × strength (constant sky), or ``world.color``
+camera                   perspective: world matrix (scale removed), lens and sensor fit →
+                         vertical FOV, shift converted to the core's units (the larger
+                         image side), pixel aspect 1
+=======================  ==================================================================
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core import job as core_job
+from ..core import shapes, spectrum
+from ..core.scene import Scene
+
+#: Object types that ``to_mesh`` turns into triangles.
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+#: Blender's default surface (no material): as the core's glTF default.
+DEFAULT_MATERIAL = core_job.MaterialSpec(name="relray_default", base_color=(0.8, 0.8, 0.8),
+                                         roughness=0.5, metallic=0.0)
+#: A triangle is degenerate when |e1 × e2| <= DEGENERATE_TOL · (|e1|² + |e2|²) (as the core).
+DEGENERATE_TOL = 1e-12
+
+
+def node_tree(id_data):
+    """The node tree of a material or world, or None when it does not use nodes.
+
+    (``use_nodes`` is deprecated from Blender 5.0 on, where node trees are always used.)
+    """
+    import bpy
+
+    if bpy.app.version < (5, 0, 0) and not getattr(id_data, "use_nodes", False):
+        return None
+    return id_data.node_tree
+
+
+class ExportError(ValueError):
+    """The scene cannot be exported (no camera, an orthographic camera, ...)."""
+
+
+@dataclass
+class Warnings:
+    """Warnings listed once each (per material, per light, ...), in order."""
+
+    messages: list[str] = field(default_factory=list)
+
+    def add(self, message: str) -> None:
+        if message not in self.messages:
+            self.messages.append(message)
+
+
+# ------------------------------------------------------------------------- meshes
+
+
+@contextmanager
+def evaluated_mesh(obj_eval, depsgraph) -> Iterator[object]:
+    """The evaluated object's mesh (modifiers applied); always freed with to_mesh_clear."""
+    mesh = None
+    try:
+        mesh = obj_eval.to_mesh(preserve_all_data_layers=False, depsgraph=depsgraph)
+        yield mesh
+    finally:
+        if mesh is not None:
+            obj_eval.to_mesh_clear()
+
+
+@dataclass
+class MeshArrays:
+    """One mesh in its object's local space."""
+
+    triangles: np.ndarray  # float64 (T, 3, 3)
+    normals: np.ndarray  # float64 (T, 3, 3) corner (shading) normals
+    material_index: np.ndarray  # int32 (T,) material slot of each triangle
+
+
+def mesh_arrays(mesh) -> MeshArrays:
+    """Loop triangles, corner normals and material slots through foreach_get."""
+    mesh.calc_loop_triangles()
+    n_tri = len(mesh.loop_triangles)
+    n_vert = len(mesh.vertices)
+    co = np.empty(n_vert * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    tri_vert = np.empty(n_tri * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", tri_vert)
+    tri_loop = np.empty(n_tri * 3, np.int32)
+    mesh.loop_triangles.foreach_get("loops", tri_loop)
+    mat = np.empty(n_tri, np.int32)
+    mesh.loop_triangles.foreach_get("material_index", mat)
+    corner = np.empty(len(mesh.loops) * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", corner)
+    tris = co.reshape(-1, 3).astype(np.float64)[tri_vert].reshape(n_tri, 3, 3)
+    normals = corner.reshape(-1, 3).astype(np.float64)[tri_loop].reshape(n_tri, 3, 3)
+    return MeshArrays(tris, normals, mat)
+
+
+def transform(arrays: MeshArrays, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World-space triangles and normals; winding kept front-facing under mirroring."""
+    m = np.asarray(matrix, np.float64)
+    lin = m[:3, :3]
+    tris = arrays.triangles @ lin.T + m[:3, 3]
+    normals = arrays.normals @ np.linalg.inv(lin)  # (M^-T n) for row vectors
+    if np.linalg.det(lin) < 0.0:
+        tris = tris[:, [0, 2, 1]]
+        normals = normals[:, [0, 2, 1]]
+    return tris, normals
+
+
+def matrix_np(matrix) -> np.ndarray:
+    """A mathutils Matrix as float64 (4, 4) (rows as in Blender)."""
+    return np.array([list(row) for row in matrix], np.float64)
+
+
+# ---------------------------------------------------------------------- materials
+
+
+def _linked_node(socket):
+    """The node feeding an input socket (through reroutes), or None."""
+    seen = 0
+    while socket.is_linked and seen < 64:
+        link = socket.links[0]
+        if not link.is_valid or link.is_muted:
+            return None
+        node = link.from_node
+        if node.type == "REROUTE":
+            socket = node.inputs[0]
+            seen += 1
+            continue
+        return node
+    return None
+
+
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """The sRGB EOTF (IEC 61966-2-1)."""
+    v = np.asarray(v, np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def image_mean_color(image) -> np.ndarray | None:
+    """Mean linear RGB of an image's pixels (None if it has none)."""
+    n = len(image.pixels)
+    if n == 0 or image.channels < 3:
+        return None
+    px = np.empty(n, np.float32)
+    image.pixels.foreach_get(px)
+    px = px.reshape(-1, image.channels)[:, :3].astype(np.float64)
+    space = image.colorspace_settings.name
+    if not image.is_float and space in ("sRGB", "sRGB - Texture"):
+        px = srgb_to_linear(px)
+    return px.mean(axis=0)
+
+
+@dataclass
+class _Reader:
+    """Reads node inputs as plain values, collecting warnings for one material or world."""
+
+    label: str  # "material 'Red'", "world 'World'"
+    warnings: Warnings
+    blackbody: float | None = None
+
+    def warn(self, text: str) -> None:
+        self.warnings.add(f"{self.label}: {text}")
+
+    def color(self, node, name: str, default=(0.0, 0.0, 0.0), emission: bool = False):
+        sock = node.inputs.get(name)
+        if sock is None:
+            return np.asarray(default, np.float64)
+        src = _linked_node(sock)
+        if src is None:
+            return np.asarray(sock.default_value[:3], np.float64)
+        if src.type == "RGB":
+            return np.asarray(src.outputs[0].default_value[:3], np.float64)
+        if src.type == "TEX_IMAGE" and src.image is not None:
+            mean = image_mean_color(src.image)
+            if mean is not None:
+                self.warn(f"image texture '{src.image.name}' on '{name}' is used as its mean "
+                          "colour (the core has no textures yet)")
+                return mean
+        if src.type == "BLACKBODY" and emission:
+            temp = self.value(src, "Temperature", 6500.0)
+            self.blackbody = max(temp, 1.0)
+            return np.ones(3)
+        self.warn(f"'{name}' is driven by an unsupported '{src.bl_idname}' node: using the "
+                  "socket's own value")
+        return np.asarray(sock.default_value[:3], np.float64)
+
+    def value(self, node, name: str, default: float) -> float:
+        sock = node.inputs.get(name)
+        if sock is None:
+            return float(default)
+        src = _linked_node(sock)
+        if src is None:
+            return float(sock.default_value)
+        if src.type == "VALUE":
+            return float(src.outputs[0].default_value)
+        self.warn(f"'{name}' is driven by an unsupported '{src.bl_idname}' node: using the "
+                  "socket's own value")
+        return float(sock.default_value)
+
+
+def _first_input(node, *names: str):
+    """The first of ``names`` that the node has (sockets were renamed in Blender 4.0)."""
+    for n in names:
+        if node.inputs.get(n) is not None:
+            return n
+    return names[0]
+
+
+def _clamp01(x: float) -> float:
+    return float(min(max(x, 0.0), 1.0))
+
+
+def _emission(color: np.ndarray, strength: float) -> tuple[tuple[float, float, float], float]:
+    """Emission colour in [0, 1] with the scale moved into the strength (as glTF stores it)."""
+    c = np.maximum(np.asarray(color, np.float64), 0.0)
+    peak = float(c.max())
+    if peak <= 0.0 or strength <= 0.0:
+        return (0.0, 0.0, 0.0), 0.0
+    return tuple(float(x) for x in c / peak), float(strength) * peak
+
+
+def material_spec(mat, warnings: Warnings) -> core_job.MaterialSpec:
+    """The core material of a Blender material (see the module table)."""
+    if mat is None:
+        return DEFAULT_MATERIAL
+    name = mat.name_full
+    r = _Reader(f"material '{name}'", warnings)
+    tree = node_tree(mat)
+    surface = None
+    if tree is not None:
+        out = tree.get_output_node("CYCLES") or tree.get_output_node("ALL")
+        if out is not None and out.inputs.get("Surface") is not None:
+            surface = _linked_node(out.inputs["Surface"])
+    if surface is None:
+        if tree is not None:
+            r.warn("no surface shader connected to the Material Output: using the viewport "
+                   "display colour")
+        return _spec(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
+    kind = surface.type
+    if kind in ("MIX_SHADER", "ADD_SHADER"):
+        inputs = [s for s in surface.inputs if s.type == "SHADER"]
+        shaders = [n for n in (_linked_node(s) for s in inputs) if n is not None]
+        r.warn(f"'{surface.bl_idname}' is not supported: using its first shader only")
+        if not shaders:
+            return _spec(name, mat.diffuse_color[:3], 0.5, 0.0)
+        surface, kind = shaders[0], shaders[0].type
+    if kind == "BSDF_PRINCIPLED":
+        base = r.color(surface, "Base Color", (0.8, 0.8, 0.8))
+        em_name = _first_input(surface, "Emission Color", "Emission")
+        em_color = r.color(surface, em_name, (0.0, 0.0, 0.0), emission=True)
+        strength = r.value(surface, "Emission Strength", 1.0)
+        for weight, label in (("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
+                              ("Subsurface Weight", "subsurface")):
+            if r.value(surface, weight, 0.0) > 0.0:
+                r.warn(f"{label} is not supported and is ignored")
+        if r.value(surface, "Alpha", 1.0) < 1.0:
+            r.warn("alpha (transparency) is not supported and is ignored")
+        if surface.inputs.get("Normal") is not None and surface.inputs["Normal"].is_linked:
+            r.warn("normal and bump maps are not supported and are ignored")
+        emission, em_strength = _emission(em_color, strength)
+        return _spec(
+            name, base,
+            roughness=r.value(surface, "Roughness", 0.5),
+            metallic=r.value(surface, "Metallic", 0.0),
+            transmission=r.value(surface, _first_input(surface, "Transmission Weight",
+                                                       "Transmission"), 0.0),
+            ior=r.value(surface, "IOR", 1.5),
+            emission=emission, emission_strength=em_strength, blackbody=r.blackbody)
+    if kind == "EMISSION":
+        color = r.color(surface, "Color", (1.0, 1.0, 1.0), emission=True)
+        emission, em_strength = _emission(color, r.value(surface, "Strength", 1.0))
+        return _spec(name, (0.0, 0.0, 0.0), roughness=1.0, emission=emission,
+                     emission_strength=em_strength, blackbody=r.blackbody)
+    if kind == "BSDF_DIFFUSE":
+        return _spec(name, r.color(surface, "Color", (0.8, 0.8, 0.8)), roughness=1.0)
+    if kind in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
+        return _spec(name, r.color(surface, "Color", (0.8, 0.8, 0.8)),
+                     roughness=r.value(surface, "Roughness", 0.5), metallic=1.0)
+    if kind == "BSDF_GLASS":
+        return _spec(name, r.color(surface, "Color", (1.0, 1.0, 1.0)),
+                     roughness=r.value(surface, "Roughness", 0.0), transmission=1.0,
+                     ior=r.value(surface, "IOR", 1.5))
+    r.warn(f"surface shader '{surface.bl_idname}' is not supported: using the viewport "
+           "display colour")
+    return _spec(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
+
+
+def _spec(name: str, base, roughness: float = 0.5, metallic: float = 0.0,
+          transmission: float = 0.0, ior: float = 1.5,
+          emission=(0.0, 0.0, 0.0), emission_strength: float = 0.0,
+          blackbody: float | None = None) -> core_job.MaterialSpec:
+    """A MaterialSpec with every value inside the job format's ranges."""
+    base = tuple(_clamp01(float(x)) for x in base)
+    if blackbody is not None and emission_strength > 0.0:
+        emission = (1.0, 1.0, 1.0)
+    else:
+        blackbody = None
+    return core_job.MaterialSpec(
+        name=name,
+        base_color=base,
+        roughness=_clamp01(roughness),
+        metallic=_clamp01(metallic),
+        transmission=_clamp01(transmission),
+        ior=float(min(max(ior, 1.0), 100.0)),
+        emission=tuple(max(float(x), 0.0) for x in emission),
+        emission_strength=max(float(emission_strength), 0.0),
+        emission_blackbody=None if blackbody is None else float(min(blackbody, 1e9)),
+    )
+
+
+# ------------------------------------------------------------------------- lights
+
+
+def _frozen(a) -> np.ndarray:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+def _light_color(light, warnings: Warnings) -> np.ndarray:
+    color = np.asarray(light.color[:3], np.float64)
+    if getattr(light, "use_temperature", False):
+        rgb = spectrum.blackbody_rgb(float(light.temperature))
+        y = float(np.dot([0.2126, 0.7152, 0.0722], rgb))
+        color = color * (rgb / y if y > 0 else 1.0)
+    if getattr(light, "use_nodes", False) and light.node_tree is not None:
+        warnings.add(f"light '{light.name}': light nodes are ignored")
+    return np.maximum(color, 0.0)
+
+
+def light_power(light) -> float:
+    """Blender's power (W; sun: W/m²) times 2^exposure."""
+    return float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+
+
+def light_spec(obj_eval, matrix: np.ndarray, warnings: Warnings) -> core_job.LightSpec | None:
+    """A point, spot or sun light (None for area lights: see :func:`area_light_quad`)."""
+    light = obj_eval.data
+    m = np.asarray(matrix, np.float64)
+    direction = -m[:3, 2]
+    norm = float(np.linalg.norm(direction))
+    direction = direction / norm if norm > 0 else np.array([0.0, 0.0, -1.0])
+    common = dict(position=_frozen(m[:3, 3]), direction=_frozen(direction),
+                  color=_frozen(_light_color(light, warnings)),
+                  power=max(light_power(light), 0.0), name=obj_eval.name)
+    if light.type == "POINT":
+        return core_job.LightSpec(type="point", radius=float(light.shadow_soft_size), **common)
+    if light.type == "SPOT":
+        return core_job.LightSpec(type="spot", radius=float(light.shadow_soft_size),
+                                  spot_size=float(min(max(light.spot_size, 1e-4), math.pi)),
+                                  spot_blend=_clamp01(light.spot_blend), **common)
+    if light.type == "SUN":
+        return core_job.LightSpec(type="sun", **common)
+    return None
+
+
+@dataclass
+class AreaLight:
+    """An area light as the core renders it: an emissive one-sided quad."""
+
+    corners: np.ndarray  # float64 (4, 3), front face (c1-c0)×(c2-c0) along the light
+    material: core_job.MaterialSpec
+
+
+def area_light(obj_eval, matrix: np.ndarray, warnings: Warnings) -> AreaLight:
+    """The quad of an area light, exact in position, size and rotation."""
+    light = obj_eval.data
+    shape = light.shape
+    w = float(light.size)
+    h = float(light.size_y) if shape in ("RECTANGLE", "ELLIPSE") else w
+    if shape in ("DISK", "ELLIPSE"):
+        k = math.sqrt(math.pi) / 2.0  # the rectangle of the same area
+        w, h = w * k, h * k
+        warnings.add(f"light '{obj_eval.name}': {shape.lower()} area lights are rendered as "
+                     "rectangles of the same area")
+    if getattr(light, "spread", math.pi) < math.pi - 1e-6:
+        warnings.add(f"light '{obj_eval.name}': area light spread is not supported (180°)")
+    local = np.array([[-w / 2, -h / 2, 0.0], [-w / 2, h / 2, 0.0],
+                      [w / 2, h / 2, 0.0], [w / 2, -h / 2, 0.0]])
+    m = np.asarray(matrix, np.float64)
+    corners = local @ m[:3, :3].T + m[:3, 3]
+    area = float(np.linalg.norm(np.cross(corners[1] - corners[0], corners[3] - corners[0])))
+    color = _light_color(light, warnings)
+    radiance = light_power(light) / (math.pi * area) if area > 0 else 0.0
+    emission, strength = _emission(color, radiance)
+    mat = core_job.MaterialSpec(
+        name=f"area_light:{obj_eval.name}", base_color=(0.0, 0.0, 0.0), roughness=1.0,
+        emission=emission, emission_strength=strength, one_sided_emission=True)
+    return AreaLight(corners, mat)
+
+
+# -------------------------------------------------------------------- world, camera
+
+
+def world_background(world, warnings: Warnings) -> np.ndarray:
+    """The constant sky radiance (RGB) of the world."""
+    if world is None:
+        return np.zeros(3)
+    tree = node_tree(world)
+    if tree is None:
+        return np.maximum(np.asarray(world.color[:3], np.float64), 0.0)
+    out = tree.get_output_node("CYCLES") or tree.get_output_node("ALL")
+    node = _linked_node(out.inputs["Surface"]) if out is not None else None
+    if node is None:
+        return np.zeros(3)
+    if node.type != "BACKGROUND":
+        warnings.add(f"world '{world.name}': '{node.bl_idname}' is not supported: the sky is "
+                     "black")
+        return np.zeros(3)
+    r = _Reader(f"world '{world.name}'", warnings)
+    color = r.color(node, "Color", (0.05, 0.05, 0.05))
+    return np.maximum(color * r.value(node, "Strength", 1.0), 0.0)
+
+
+def render_size(render) -> tuple[int, int]:
+    """The render size in pixels, resolution percentage applied (as Blender does)."""
+    pct = render.resolution_percentage
+    return (max(1, int(render.resolution_x * pct / 100)),
+            max(1, int(render.resolution_y * pct / 100)))
+
+
+def camera_settings(cam_obj_eval, width: int, height: int, render=None,
+                    warnings: Warnings | None = None) -> core_job.CameraSettings:
+    """The core camera of a perspective Blender camera at its evaluated pose."""
+    from .motion import unit_rotation
+
+    cam = cam_obj_eval.data
+    if cam_obj_eval.type != "CAMERA":
+        raise ExportError(f"the active camera '{cam_obj_eval.name}' is not a camera object")
+    if cam.type != "PERSP":
+        raise ExportError(f"camera '{cam_obj_eval.name}': only perspective cameras are "
+                          f"supported (it is {cam.type.lower()})")
+    aspx = aspy = 1.0
+    if render is not None:
+        aspx, aspy = float(render.pixel_aspect_x), float(render.pixel_aspect_y)
+        if warnings is not None and aspx != aspy:
+            warnings.add("non-square pixel aspect is ignored")
+    fit = cam.sensor_fit
+    if fit == "AUTO":
+        fit = "HORIZONTAL" if width * aspx >= height * aspy else "VERTICAL"
+        sensor = cam.sensor_width
+    else:
+        sensor = cam.sensor_width if fit == "HORIZONTAL" else cam.sensor_height
+    tan_fit = 0.5 * float(sensor) / float(cam.lens)
+    tan_v = tan_fit * height / width if fit == "HORIZONTAL" else tan_fit
+    fitted = width if fit == "HORIZONTAL" else height
+    scale = fitted / max(width, height)
+    m = matrix_np(cam_obj_eval.matrix_world)
+    return core_job.CameraSettings(
+        position=_frozen(m[:3, 3]),
+        rotation=_frozen(unit_rotation(m[:3, :3])),
+        fov=math.degrees(2.0 * math.atan(tan_v)),
+        shift=(float(cam.shift_x) * scale, float(cam.shift_y) * scale),
+    )
+
+
+# -------------------------------------------------------------------------- scene
+
+
+@dataclass
+class ExportedScene:
+    """A scene ready for ``core.render.prepare``, and what the export saw."""
+
+    scene: Scene
+    camera: core_job.CameraSettings
+    width: int
+    height: int
+    warnings: Warnings
+    material_triangles: dict[str, np.ndarray]  # material name -> (K, 3, 3) world triangles
+    area_lights: list[AreaLight]
+    seconds: float = 0.0
+    instances: int = 0
+
+
+@dataclass
+class _Builder:
+    """Accumulates world-space triangles and the material table."""
+
+    warnings: Warnings
+    materials: list[core_job.MaterialSpec] = field(default_factory=list)
+    index: dict[str, int] = field(default_factory=dict)
+    tris: list[np.ndarray] = field(default_factory=list)
+    normals: list[np.ndarray] = field(default_factory=list)
+    ids: list[np.ndarray] = field(default_factory=list)
+
+    def material_id(self, mat) -> int:
+        key = "\0default" if mat is None else mat.name_full
+        if key not in self.index:
+            self.index[key] = len(self.materials)
+            self.materials.append(material_spec(mat, self.warnings))
+        return self.index[key]
+
+    def add(self, tris: np.ndarray, normals: np.ndarray, ids: np.ndarray) -> None:
+        if len(tris):
+            self.tris.append(tris)
+            self.normals.append(normals)
+            self.ids.append(np.asarray(ids, np.int32))
+
+
+def _slot_materials(obj_eval) -> list:
+    mats = [slot.material for slot in obj_eval.material_slots]
+    if not mats and obj_eval.type == "MESH":
+        mats = list(obj_eval.data.materials)
+    return mats
+
+
+def export_scene(depsgraph, camera_obj=None, width: int | None = None,
+                 height: int | None = None,
+                 test_break: Callable[[], bool] | None = None) -> ExportedScene:
+    """Export the evaluated depsgraph (the render's, or the viewport's) for the core.
+
+    ``camera_obj``: the camera object (original or evaluated; default the scene's);
+    ``width``/``height``: the render size (default from the scene's resolution).
+    """
+    t0 = time.perf_counter()
+    scene = depsgraph.scene
+    warnings = Warnings()
+    if width is None or height is None:
+        width, height = render_size(scene.render)
+    cam = camera_obj if camera_obj is not None else scene.camera
+    if cam is None:
+        raise ExportError("the scene has no active camera")
+    cam_eval = cam.evaluated_get(depsgraph)
+    camera = camera_settings(cam_eval, width, height, scene.render, warnings)
+
+    b = _Builder(warnings)
+    lights: list[core_job.LightSpec] = []
+    areas: list[AreaLight] = []
+    cache: dict[tuple, tuple[MeshArrays, list]] = {}
+    count = 0
+    for inst in depsgraph.object_instances:
+        count += 1
+        if test_break is not None and count % 2000 == 0 and test_break():
+            raise InterruptedError("export cancelled")
+        obj = inst.object
+        if not inst.show_self or (not inst.is_instance and obj.original.hide_render):
+            continue
+        matrix = matrix_np(inst.matrix_world)  # copy now: the item dies after this step
+        if obj.type == "LIGHT":
+            if obj.data.type == "AREA":
+                areas.append(area_light(obj, matrix, warnings))
+            else:
+                spec = light_spec(obj, matrix, warnings)
+                if spec is not None:
+                    lights.append(spec)
+            continue
+        if obj.type not in GEOMETRY_TYPES:
+            if obj.type in ("CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"):
+                warnings.add(f"{obj.type.lower()} objects are not rendered ('{obj.name}')")
+            continue
+        mats = _slot_materials(obj)
+        # Instances of one mesh share its evaluated data: read it once (per material set).
+        key = (obj.data.as_pointer() if (inst.is_instance and obj.data is not None)
+               else obj.as_pointer(), tuple(m.name_full if m else "" for m in mats))
+        if key not in cache:
+            with evaluated_mesh(obj, depsgraph) as mesh:
+                if mesh is None:
+                    continue
+                cache[key] = (mesh_arrays(mesh), mats)
+        arrays, mats = cache[key]
+        if len(arrays.triangles) == 0:
+            continue
+        slot_ids = np.array([b.material_id(mats[i] if i < len(mats) else None)
+                             for i in range(max(len(mats), 1))], np.int32)
+        idx = np.clip(arrays.material_index, 0, len(slot_ids) - 1)
+        tris, normals = transform(arrays, matrix)
+        b.add(tris, normals, slot_ids[idx])
+
+    for area in areas:
+        quad = shapes.quad(area.corners)
+        b.materials.append(area.material)
+        b.add(quad, np.repeat(shapes.face_normals(quad)[:, None, :], 3, axis=1),
+              np.full(len(quad), len(b.materials) - 1))
+
+    if not b.tris:
+        raise ExportError("the scene has no geometry to render")
+    triangles = np.concatenate(b.tris)
+    normals = np.concatenate(b.normals)
+    ids = np.concatenate(b.ids)
+    triangles, normals, ids = _drop_degenerate(triangles, normals, ids)
+    if len(triangles) == 0:
+        raise ExportError("the scene has no geometry to render (all triangles degenerate)")
+    normals = _clean_normals(normals, triangles)
+    core_scene = Scene(
+        triangles=np.ascontiguousarray(triangles, np.float32),
+        normals=np.ascontiguousarray(normals, np.float32),
+        material_ids=np.ascontiguousarray(ids, np.int32),
+        materials=b.materials,
+        lights=lights,
+        background=world_background(scene.world, warnings),
+        camera=camera,
+    )
+    by_material = {m.name: triangles[ids == i] for i, m in enumerate(b.materials)}
+    return ExportedScene(core_scene, camera, width, height, warnings, by_material, areas,
+                         seconds=time.perf_counter() - t0, instances=count)
+
+
+def _drop_degenerate(tris: np.ndarray, normals: np.ndarray, ids: np.ndarray):
+    """Remove zero-area or non-finite triangles (tested in float32, as the core)."""
+    t = tris.astype(np.float32).astype(np.float64)
+    finite = np.all(np.isfinite(t), axis=(1, 2))
+    t = np.where(finite[:, None, None], t, 0.0)
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    cross = np.linalg.norm(np.cross(e1, e2), axis=1)
+    keep = finite & (cross > DEGENERATE_TOL * ((e1 * e1).sum(1) + (e2 * e2).sum(1))) \
+        & (cross > 0.0)
+    return tris[keep], normals[keep], ids[keep]
+
+
+def _clean_normals(normals: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Unit shading normals; a zero or non-finite one becomes the face normal."""
+    length = np.linalg.norm(normals, axis=2, keepdims=True)
+    good = np.isfinite(length) & (length > 1e-20)
+    unit = np.divide(normals, np.where(good, length, 1.0))
+    face = np.repeat(shapes.face_normals(tris)[:, None, :], 3, axis=1)
+    return np.where(good, unit, face)

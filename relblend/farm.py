@@ -1,0 +1,438 @@
+"""Export for farm: ``scene.glb`` (Blender's glTF exporter) plus a job TOML.
+
+``relray render job.toml`` then renders what the engine renders inside Blender: the
+same geometry, materials, lights, sky, camera, seed and every frame's β and ct'.
+
+Layout of the export directory::
+
+    job.toml        the job (job-format.md); output to ./out/frame_####.{exr,png}
+    scene.glb       meshes with modifiers applied and instances (Blender's exporter,
+                    Y-up; the core converts back), materials patched to the add-on's
+                    own material export
+    meshes/*.ply    geometry whose material glTF cannot carry (blackbody emitters)
+
+What goes where, and why:
+
+==================  ========================================================================
+scene.glb           triangles of every renderable mesh object. Materials: the exporter's
+                    output is overwritten with the add-on's factors (base colour,
+                    metallic, roughness, emission colour in [0, 1] with the scale in
+                    KHR_materials_emissive_strength, transmission, IOR; textures dropped:
+                    both renders use an image's mean colour)
+[[materials]],      blackbody emitters (removed from the glb, written as PLY meshes) and
+[[objects]]         area lights (exact quads: [[lights]] area would lose the rotation
+                    about the light's axis)
+[[lights]]          point, spot, sun (the glTF light units would round-trip through
+                    photometric conversions)
+[scene]             ``file = "scene.glb"``, the world's constant background
+[camera]            position, rotation (3×3 rows), vertical fov, shift
+[motion]            mode; ct', ct' per frame; one keyframe per frame (β in world axes,
+                    evaluated with every F-curve, driver, parent and constraint)
+[render]            size (resolution % applied), samples, max depth, seed, spectral model,
+                    Doppler, searchlight
+==================  ========================================================================
+
+Limits (each a clear :class:`FarmExportError`): the camera must not move or turn
+during the frame range (a job has one camera pose), and in snapshot mode ct' must
+change linearly with the frame (a job has one ``ct_per_frame``). Modifiers are
+exported with their render settings (viewport visibility and subdivision levels are
+set to the render ones while the exporter runs, then restored).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import struct
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import export, motion
+
+GLB_MAGIC = b"glTF"
+_CHUNK_JSON = 0x4E4F534A
+_CHUNK_BIN = 0x004E4942
+
+
+class FarmExportError(ValueError):
+    """The scene cannot be written as one job; the message says why."""
+
+
+# ------------------------------------------------------------------------- motion
+
+
+@dataclass
+class FrameSample:
+    """The camera at one frame, in lab (world) axes."""
+
+    frame: int
+    beta: np.ndarray
+    ct: float
+    ct_per_frame: float
+    matrix: np.ndarray  # (4, 4) world matrix of the camera
+
+
+def sample_camera(context, cam, frames: range) -> list[FrameSample]:
+    """Evaluate the camera at every frame (``scene.frame_set``), then restore the frame."""
+    scene = context.scene
+    current, subframe = scene.frame_current, scene.frame_subframe
+    out = []
+    try:
+        for f in frames:
+            scene.frame_set(f)
+            depsgraph = context.evaluated_depsgraph_get()
+            cam_eval = cam.evaluated_get(depsgraph)
+            m = export.matrix_np(cam_eval.matrix_world)
+            s = cam_eval.data.relray
+            beta = motion.check_speed(motion.beta_lab(
+                motion.VelocitySettings.from_rna(s), motion.unit_rotation(m[:3, :3])), f)
+            out.append(FrameSample(f, beta, float(s.ct), float(s.ct_per_frame), m))
+    finally:
+        scene.frame_set(current, subframe=subframe)
+    return out
+
+
+def motion_table(mode: str, samples: list[FrameSample]) -> dict[str, Any]:
+    """The job's [motion] table: every frame's β as a keyframe, ct' and ct' per frame."""
+    frames = [s.frame for s in samples]
+    if mode == "WORLDLINE":
+        ct0, per_frame = samples[0].ct, samples[0].ct_per_frame
+        if per_frame < 0.0:
+            raise FarmExportError("worldline mode: ct' per frame must be >= 0")
+    else:
+        fit = motion.affine_fit(frames, [s.ct for s in samples])
+        if fit is None:
+            raise FarmExportError(
+                "snapshot mode: ct' must change linearly with the frame for a farm job (the "
+                "job format has one ct_per_frame); key ct' with linear interpolation, or "
+                "export frame ranges over which it is linear")
+        ct0, per_frame = fit
+        if per_frame < 0.0:
+            raise FarmExportError("snapshot mode: ct' decreases with the frame; the job "
+                                  "format needs ct_per_frame >= 0")
+    return {
+        "mode": mode.lower(),
+        "beta": [float(x) for x in samples[0].beta],
+        "ct": ct0,
+        "frames": [frames[0], frames[-1]],
+        "ct_per_frame": per_frame,
+        "keyframes": [{"frame": s.frame, "beta": [float(x) for x in s.beta]} for s in samples],
+    }
+
+
+def check_static_camera(samples: list[FrameSample], tol: float = 1e-6) -> None:
+    """A job has one camera pose: refuse a camera that moves or turns over the frames."""
+    ref = samples[0].matrix
+    for s in samples[1:]:
+        if not np.allclose(s.matrix, ref, atol=tol * max(1.0, float(np.abs(ref).max()))):
+            raise FarmExportError(
+                f"the camera moves or turns between frames {samples[0].frame} and {s.frame}: "
+                "a job has one camera pose (keep the camera object still and give its motion "
+                "as β), or export single frames")
+
+
+# ------------------------------------------------------------------------ modifiers
+
+
+@contextmanager
+def render_modifier_settings(scene) -> Iterator[None]:
+    """Modifiers as they render (visibility, subdivision levels) while glTF exports."""
+    saved: list[tuple[Any, str, Any]] = []
+    try:
+        for obj in scene.objects:
+            for mod in getattr(obj, "modifiers", ()):
+                if mod.show_viewport != mod.show_render:
+                    saved.append((mod, "show_viewport", mod.show_viewport))
+                    mod.show_viewport = mod.show_render
+                if mod.type in ("SUBSURF", "MULTIRES") and hasattr(mod, "render_levels"):
+                    if mod.levels != mod.render_levels:
+                        saved.append((mod, "levels", mod.levels))
+                        mod.levels = mod.render_levels
+        yield
+    finally:
+        for mod, attr, value in reversed(saved):
+            setattr(mod, attr, value)
+
+
+# ---------------------------------------------------------------------------- GLB
+
+
+def read_glb(path: Path) -> tuple[dict[str, Any], bytes]:
+    """The JSON document and binary chunk of a GLB file."""
+    raw = path.read_bytes()
+    if raw[:4] != GLB_MAGIC:
+        raise FarmExportError(f"{path} is not a GLB file")
+    offset, doc, binary = 12, None, b""
+    while offset + 8 <= len(raw):
+        length, kind = struct.unpack_from("<II", raw, offset)
+        data = raw[offset + 8: offset + 8 + length]
+        offset += 8 + length
+        if kind == _CHUNK_JSON and doc is None:
+            doc = json.loads(data.decode("utf-8"))
+        elif kind == _CHUNK_BIN and not binary:
+            binary = data
+    if doc is None:
+        raise FarmExportError(f"{path} has no JSON chunk")
+    return doc, binary
+
+
+def write_glb(path: Path, doc: dict[str, Any], binary: bytes) -> None:
+    """A GLB file from a JSON document and a binary chunk (both padded to 4 bytes)."""
+    js = json.dumps(doc, separators=(",", ":")).encode("utf-8")
+    js += b" " * (-len(js) % 4)
+    binary = binary + b"\0" * (-len(binary) % 4)
+    chunks = struct.pack("<II", len(js), _CHUNK_JSON) + js
+    if binary:
+        chunks += struct.pack("<II", len(binary), _CHUNK_BIN) + binary
+    path.write_bytes(struct.pack("<4sII", GLB_MAGIC, 2, 12 + len(chunks)) + chunks)
+
+
+def patch_materials(doc: dict[str, Any], specs: dict[str, Any], drop: set[str]) -> int:
+    """Overwrite glTF materials with the add-on's specs; drop primitives of ``drop``.
+
+    Returns the number of primitives removed. Materials are matched by name.
+    """
+    mats = doc.get("materials", [])
+    for m in mats:
+        spec = specs.get(m.get("name"))
+        if spec is None:
+            continue
+        for key in ("normalTexture", "emissiveTexture", "occlusionTexture"):
+            m.pop(key, None)
+        m["pbrMetallicRoughness"] = {
+            "baseColorFactor": [*(float(x) for x in spec.base_color), 1.0],
+            "metallicFactor": float(spec.metallic),
+            "roughnessFactor": float(spec.roughness),
+        }
+        ext = {k: v for k, v in m.get("extensions", {}).items()
+               if k not in ("KHR_materials_emissive_strength", "KHR_materials_transmission",
+                            "KHR_materials_ior", "KHR_materials_unlit")}
+        if spec.emission_strength > 0.0 and any(spec.emission):
+            m["emissiveFactor"] = [float(x) for x in spec.emission]
+            ext["KHR_materials_emissive_strength"] = {
+                "emissiveStrength": float(spec.emission_strength)}
+        else:
+            m.pop("emissiveFactor", None)
+        if spec.transmission > 0.0:
+            ext["KHR_materials_transmission"] = {"transmissionFactor": float(spec.transmission)}
+        ext["KHR_materials_ior"] = {"ior": float(spec.ior)}
+        m["extensions"] = ext
+        used = set(doc.get("extensionsUsed", []))
+        doc["extensionsUsed"] = sorted(used | set(ext))
+    removed = 0
+    drop_ids = {i for i, m in enumerate(mats) if m.get("name") in drop}
+    for mesh in doc.get("meshes", []):
+        keep = [p for p in mesh["primitives"] if p.get("material") not in drop_ids]
+        removed += len(mesh["primitives"]) - len(keep)
+        mesh["primitives"] = keep
+    if removed:  # a mesh without primitives is invalid glTF: detach such meshes
+        empty = {i for i, mesh in enumerate(doc["meshes"]) if not mesh["primitives"]}
+        for node in doc.get("nodes", []):
+            if node.get("mesh") in empty:
+                del node["mesh"]
+    return removed
+
+
+def write_ply(path: Path, triangles: np.ndarray) -> None:
+    """Binary little-endian PLY of unshared triangles (float32 vertices)."""
+    tris = np.asarray(triangles, np.float32).reshape(-1, 3)
+    n_faces = len(tris) // 3
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment relray farm export\n"
+        f"element vertex {len(tris)}\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {n_faces}\nproperty list uchar int vertex_indices\nend_header\n"
+    ).encode("ascii")
+    faces = np.zeros(n_faces, dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    faces["n"] = 3
+    faces["i"] = np.arange(len(tris), dtype=np.int32).reshape(-1, 3)
+    path.write_bytes(header + tris.astype("<f4").tobytes() + faces.tobytes())
+
+
+# --------------------------------------------------------------------------- TOML
+
+
+def _toml_key(key: str) -> str:
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int | np.integer):
+        return str(int(v))
+    if isinstance(v, float | np.floating):
+        x = float(v)
+        if not math.isfinite(x):
+            raise FarmExportError(f"cannot write the non-finite number {x} into a job")
+        return repr(x)
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) \
+            + " }"
+    if isinstance(v, list | tuple | np.ndarray):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise FarmExportError(f"cannot write {type(v).__name__} into a job")
+
+
+def _toml_table(table: dict[str, Any]) -> list[str]:
+    lines = []
+    for k, v in table.items():
+        if isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
+            lines.append(f"{_toml_key(k)} = [")
+            lines += [f"    {_toml_value(x)}," for x in v]
+            lines.append("]")
+        else:
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+    return lines
+
+
+def toml_dumps(doc: dict[str, Any], header: str = "") -> str:
+    """TOML text of a job dict: tables, arrays of tables, inline tables inside."""
+    lines = [f"# {line}" for line in header.splitlines()]
+    for key, value in doc.items():
+        if isinstance(value, dict):
+            lines += ["", f"[{_toml_key(key)}]", *_toml_table(value)]
+        elif isinstance(value, list):
+            for item in value:
+                lines += ["", f"[[{_toml_key(key)}]]", *_toml_table(item)]
+        else:
+            raise FarmExportError(f"top-level key {key!r} must be a table")
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+# ------------------------------------------------------------------------- export
+
+
+@dataclass
+class FarmExport:
+    """What the export wrote."""
+
+    job_path: Path
+    glb_path: Path
+    frames: tuple[int, int]
+    warnings: list[str] = field(default_factory=list)
+    ply_paths: list[Path] = field(default_factory=list)
+
+
+def _material_table(spec) -> dict[str, Any]:
+    t: dict[str, Any] = {
+        "name": spec.name,
+        "base_color": list(spec.base_color),
+        "roughness": spec.roughness,
+        "metallic": spec.metallic,
+        "transmission": spec.transmission,
+        "ior": spec.ior,
+        "emission": list(spec.emission),
+        "emission_strength": spec.emission_strength,
+    }
+    if spec.emission_blackbody is not None:
+        t["emission_blackbody"] = spec.emission_blackbody
+    if spec.one_sided_emission:
+        t["one_sided_emission"] = True
+    return t
+
+
+def _light_table(light) -> dict[str, Any]:
+    t: dict[str, Any] = {"type": light.type, "name": light.name,
+                         "color": [float(x) for x in light.color], "power": light.power}
+    if light.type != "sun":
+        t["position"] = [float(x) for x in light.position]
+    if light.type in ("spot", "sun"):
+        t["direction"] = [float(x) for x in light.direction]
+    if light.type in ("point", "spot"):
+        t["radius"] = light.radius
+    if light.type == "spot":
+        t["spot_size"] = math.degrees(light.spot_size)
+        t["spot_blend"] = light.spot_blend
+    return t
+
+
+def _safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "material"
+
+
+def export_farm(context, directory: str | Path, frames: tuple[int, int] | None = None,
+                job_name: str = "job.toml") -> FarmExport:
+    """Write scene.glb, meshes/*.ply and the job TOML into ``directory``."""
+    import bpy
+
+    from ..core.job import parse_job
+
+    scene = context.scene
+    out = Path(directory).expanduser().resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    cam = scene.camera
+    if cam is None:
+        raise FarmExportError("the scene has no active camera")
+    f0, f1 = frames if frames is not None else (scene.frame_start, scene.frame_end)
+    if f1 < f0:
+        raise FarmExportError(f"the frame range {f0}-{f1} is empty")
+    samples = sample_camera(context, cam, range(f0, f1 + 1))
+    check_static_camera(samples)
+    mode = cam.data.relray.mode
+    motion_doc = motion_table(mode, samples)
+
+    glb = out / "scene.glb"
+    with render_modifier_settings(scene):
+        depsgraph = context.evaluated_depsgraph_get()
+        exported = export.export_scene(depsgraph, cam)
+        bpy.ops.export_scene.gltf(
+            filepath=str(glb), export_format="GLB", use_renderable=True, export_apply=True,
+            export_lights=False, export_cameras=False, export_animations=False,
+            export_image_format="NONE", export_yup=True, export_extras=False)
+    specs = {m.name: m for m in exported.scene.materials}
+    special = {m.name for m in exported.scene.materials
+               if m.emission_blackbody is not None and not m.name.startswith("area_light:")}
+    doc, binary = read_glb(glb)
+    patch_materials(doc, specs, special)
+    write_glb(glb, doc, binary)
+
+    materials, objects, plys = [], [], []
+    if special:
+        (out / "meshes").mkdir(exist_ok=True)
+    for name in sorted(special):
+        ply = out / "meshes" / f"{_safe_name(name)}.ply"
+        write_ply(ply, exported.material_triangles[name])
+        plys.append(ply)
+        materials.append(_material_table(specs[name]))
+        objects.append({"name": name, "shape": "mesh", "file": f"meshes/{ply.name}",
+                        "material": name, "up": "z"})
+    for area in exported.area_lights:
+        materials.append(_material_table(area.material))
+        objects.append({"name": area.material.name, "shape": "quad",
+                        "corners": area.corners.tolist(), "material": area.material.name})
+
+    rs = scene.relray
+    cam_settings = exported.camera
+    job: dict[str, Any] = {
+        "render": {"width": exported.width, "height": exported.height, "spp": rs.samples,
+                   "max_depth": rs.max_depth, "seed": rs.seed, "spectral": rs.spectral,
+                   "doppler": rs.doppler, "searchlight": rs.searchlight, "threads": 0},
+        "output": {"dir": "out", "name": "frame_{frame:04d}", "formats": ["exr", "png"]},
+        "camera": {"position": [float(x) for x in cam_settings.position],
+                   "rotation": np.asarray(cam_settings.rotation).tolist(),
+                   "fov": cam_settings.fov, "shift": list(cam_settings.shift)},
+        "motion": motion_doc,
+        "scene": {"file": "scene.glb",
+                  "background": [float(x) for x in exported.scene.background]},
+    }
+    if materials:
+        job["materials"] = materials
+    if objects:
+        job["objects"] = objects
+    lights = [_light_table(light) for light in exported.scene.lights]
+    if lights:
+        job["lights"] = lights
+    job_path = out / job_name
+    parse_job(job, job_path)  # the same validation as `relray render` (raises UserError)
+    header = (f"relray farm export of '{bpy.data.filepath or 'unsaved file'}', scene "
+              f"'{scene.name}', camera '{cam.name}'\nrender with: relray render {job_name}")
+    job_path.write_text(toml_dumps(job, header), encoding="utf-8")
+    return FarmExport(job_path, glb, (f0, f1), list(exported.warnings.messages), plys)

@@ -1,0 +1,196 @@
+"""The camera's motion: from the Relativity properties to lab β and shutter events.
+
+Pure numpy on plain values; the callers read the (evaluated) Blender data and pass
+it in, so everything here is testable without Blender.
+
+Per frame f the camera has a lab velocity β_f (lab axes; from ``beta`` or
+``speed`` × ``direction``, turned by the camera's world rotation when the axes are
+"CAMERA") and a proper time. The shutter event follows physics.md:
+
+- **snapshot**: ``snapshot_event(position_f, β_f, ct_f)``: t = γ ct', x = position +
+  γ β ct', with the camera's own location of frame f and the frame's ct'.
+- **worldline**: the camera starts at its own location (its position at ct' = 0) and
+  β(τ) is linear in proper time between the integer frames f_start, f_start + 1, …,
+  with τ_f = ct'(f_start) + (f - f_start)·ct'_per_frame and β held at β(f_start) for
+  τ < τ(f_start). ``core.relativity.worldline_events`` integrates this exactly, as the
+  job file's ``keyframes`` (one per frame) do: the farm export therefore renders the
+  same events.
+
+A speed of 1 or more (possible with a vector β whose components are each below 1, or
+from a driver) is a :class:`MotionError` that names the frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core import relativity
+from ..core.camera import PinholeCamera
+from ..core.job import CameraSettings
+
+
+class MotionError(ValueError):
+    """A user error in the camera's motion; the message names the frame."""
+
+
+@dataclass(frozen=True)
+class VelocitySettings:
+    """The Relativity properties of one frame that give β (plain values)."""
+
+    velocity_input: str = "VECTOR"  # "VECTOR" | "SPEED"
+    beta: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    speed: float = 0.0
+    direction: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    axes: str = "WORLD"  # "WORLD" | "CAMERA"
+
+    @classmethod
+    def from_rna(cls, settings) -> VelocitySettings:
+        """Copy the values out of a ``RelrayCameraSettings`` (evaluated or not)."""
+        return cls(
+            velocity_input=str(settings.velocity_input),
+            beta=tuple(float(x) for x in settings.beta),
+            speed=float(settings.speed),
+            direction=tuple(float(x) for x in settings.direction),
+            axes=str(settings.axes),
+        )
+
+
+def beta_local(v: VelocitySettings) -> np.ndarray:
+    """β in the settings' own axes, float64 (3,)."""
+    if v.velocity_input == "SPEED":
+        d = np.asarray(v.direction, np.float64)
+        n = float(np.linalg.norm(d))
+        if n == 0.0 or v.speed == 0.0:
+            return np.zeros(3)
+        return (float(v.speed) / n) * d
+    return np.asarray(v.beta, np.float64)
+
+
+def beta_lab(v: VelocitySettings, camera_rotation: np.ndarray) -> np.ndarray:
+    """β in lab (world) axes. ``camera_rotation``: (3, 3), columns the camera's axes."""
+    b = beta_local(v)
+    if v.axes == "CAMERA":
+        return np.asarray(camera_rotation, np.float64) @ b
+    return b
+
+
+def check_speed(beta: np.ndarray, frame: int) -> np.ndarray:
+    """β unchanged if |β| < 1 and finite, else a MotionError naming the frame."""
+    beta = np.asarray(beta, np.float64)
+    if not np.all(np.isfinite(beta)):
+        raise MotionError(f"frame {frame}: the camera's β = {beta.tolist()} is not finite")
+    speed = math.hypot(math.hypot(beta[0], beta[1]), beta[2])
+    if speed >= 1.0:
+        raise MotionError(
+            f"frame {frame}: the camera's |β| = {speed:.6g} is not below 1 (the speed of "
+            f"light); check the β keyframes, F-curves and drivers at this frame"
+        )
+    return beta
+
+
+def gamma_of(beta: np.ndarray) -> float:
+    """Lorentz factor of a valid β."""
+    b = float(np.linalg.norm(beta))
+    return 1.0 / math.sqrt((1.0 - b) * (1.0 + b))
+
+
+def unit_rotation(matrix3: np.ndarray) -> np.ndarray:
+    """The proper rotation nearest to a (scaled, possibly sheared) 3×3 matrix."""
+    m = np.asarray(matrix3, np.float64)
+    u, _, vt = np.linalg.svd(m)
+    r = u @ vt
+    if np.linalg.det(r) < 0:  # a mirrored camera: keep its axes as they point
+        u[:, -1] *= -1.0
+        r = u @ vt
+    return r
+
+
+@dataclass(frozen=True)
+class WorldlineClock:
+    """Proper time of frames in worldline mode: τ_f = ct0 + (f - frame_start)·ct_per_frame."""
+
+    frame_start: int
+    ct0: float
+    ct_per_frame: float
+
+    def tau(self, frame: int) -> float:
+        return self.ct0 + (frame - self.frame_start) * self.ct_per_frame
+
+    def check(self) -> WorldlineClock:
+        if not (math.isfinite(self.ct0) and math.isfinite(self.ct_per_frame)):
+            raise MotionError("worldline mode: ct' and ct' per frame must be finite")
+        if self.ct_per_frame < 0.0:
+            raise MotionError("worldline mode: ct' per frame must be >= 0")
+        return self
+
+
+def snapshot_event(position: np.ndarray, beta: np.ndarray, ct: float, frame: int):
+    """The snapshot shutter event of one frame."""
+    if not math.isfinite(ct):
+        raise MotionError(f"frame {frame}: ct' = {ct} is not finite")
+    return relativity.snapshot_event(position, check_speed(beta, frame), float(ct))
+
+
+def worldline_event(position: np.ndarray, betas: Mapping[int, np.ndarray],
+                    clock: WorldlineClock, frame: int):
+    """The worldline shutter event of ``frame``.
+
+    ``betas`` maps every integer frame from min(frame_start, frame) to ``frame`` to its
+    lab β; ``position`` is the camera's lab position at ct' = 0.
+    """
+    first = min(clock.frame_start, frame)
+    keys = []
+    for f in range(first, frame + 1):
+        if f not in betas:
+            raise ValueError(f"worldline: β of frame {f} is missing")
+        keys.append((f, check_speed(betas[f], f)))
+    events = relativity.worldline_events(
+        np.asarray(position, np.float64), (first, frame), clock.tau(first),
+        clock.ct_per_frame, keyframes=keys)
+    return events[-1]
+
+
+def affine_fit(frames: Sequence[int], values: Sequence[float],
+               tol: float = 1e-9) -> tuple[float, float] | None:
+    """(value at frames[0], slope) if ``values`` are affine in ``frames``, else None."""
+    f = np.asarray(frames, np.float64)
+    v = np.asarray(values, np.float64)
+    if len(f) == 1:
+        return float(v[0]), 0.0
+    slope = (v[-1] - v[0]) / (f[-1] - f[0])
+    pred = v[0] + slope * (f - f[0])
+    scale = max(1.0, float(np.max(np.abs(v))))
+    if np.max(np.abs(pred - v)) > tol * scale:
+        return None
+    return float(v[0]), float(slope)
+
+
+def view_doppler_range(camera: CameraSettings, beta: np.ndarray, width: int, height: int,
+                       samples: int = 33) -> tuple[float, float]:
+    """(min, max) of D over the image: a grid of pixel centres and corners, plus the
+    direction of motion when it lies inside the view (where D peaks)."""
+    beta = np.asarray(beta, np.float64)
+    if not np.any(beta):
+        return 1.0, 1.0
+    cam = PinholeCamera.from_settings(camera, width, height)
+    cols = np.linspace(0.0, width, samples)
+    rows = np.linspace(0.0, height, samples)
+    c, r = np.meshgrid(cols, rows)
+    d_cam = cam.directions_cam(c.ravel(), r.ravel())
+    extremes = [d_cam]
+    b_hat = beta / np.linalg.norm(beta)
+    for sign in (1.0, -1.0):  # is ±β̂ inside the view? (then D is extreme there)
+        local = cam.rotation.T @ (sign * b_hat)
+        if local[2] < 0:
+            x, y = -local[0] / local[2], -local[1] / local[2]
+            th = cam.tan_half_fov
+            aspect = width / height
+            if abs(x) <= th * aspect * 1.0001 and abs(y) <= th * 1.0001:
+                extremes.append((sign * b_hat)[None, :])
+    d = np.concatenate(extremes)
+    D = np.atleast_1d(relativity.doppler_factor(d, beta))
+    return float(D.min()), float(D.max())

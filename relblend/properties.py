@@ -1,0 +1,207 @@
+"""The add-on's data: relativity settings of a camera, render settings of a scene.
+
+Every value is an ordinary RNA property, so it is keyframeable with I over the field,
+driveable, and evaluated per frame by the depsgraph (read it from the evaluated
+camera). Nothing here imports the core.
+
+``bpy.types.Camera.relray`` (:class:`RelrayCameraSettings`), in the camera's Object
+Data tab ("Relativity" panel):
+
+==================  ==========================================================================
+property            meaning
+==================  ==========================================================================
+``velocity_input``  "VECTOR": β as a 3-vector; "SPEED": speed |β| and a direction
+``beta``            β = v/c, 3 components in [-0.999999, 0.999999] (soft ±0.99); |β| < 1 is
+                    checked per frame when rendering (a clear error names the frame)
+``speed``           |β| in [0, 0.999999] (soft 0.99), with ``direction``
+``direction``       unit direction of motion (normalised when read; zero = at rest)
+``axes``            "WORLD": β in world (lab) axes; "CAMERA": in the camera's local axes
+                    (x right, y up, -z the view direction), turned into the lab by the
+                    camera's world rotation of each frame
+``mode``            "SNAPSHOT": each frame is a photo by a camera that has moved at its
+                    constant β since ct' = 0 (physics.md); "WORLDLINE": β is integrated
+                    over proper time from ct' = 0, frame by frame
+``ct``              proper time ct' of the shutter (scene units, c = 1). Snapshot: per
+                    frame (any animation). Worldline: read at the scene's start frame
+``ct_per_frame``    worldline mode: proper time between frames (read at the start frame)
+``gamma``           read-only Lorentz factor of the current β
+==================  ==========================================================================
+
+In worldline mode the camera object's own location is its lab position at ct' = 0;
+β between integer frames is linear in proper time (the job format's keyframes).
+
+``bpy.types.Scene.relray`` (:class:`RelraySceneSettings`), "Relativistic" panels of the
+Render tab: samples, seed, max bounces, spectral model, Doppler and searchlight
+switches, threads. ``bpy.types.ViewLayer.relray`` (:class:`RelrayViewLayerSettings`):
+the Doppler and LabTime passes (Depth is Blender's own Z pass toggle).
+"""
+
+import math
+
+import bpy
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    FloatVectorProperty,
+    IntProperty,
+    PointerProperty,
+)
+
+#: Largest component / speed the UI accepts (|β| must stay below 1: c = 1).
+BETA_HARD_MAX = 0.999999
+BETA_SOFT_MAX = 0.99
+
+
+def _gamma_get(self) -> float:
+    """γ = 1/sqrt((1-b)(1+b)) of the stored β (0 when |β| >= 1: invalid)."""
+    b = self.speed if self.velocity_input == "SPEED" else math.sqrt(sum(x * x for x in self.beta))
+    if self.velocity_input == "SPEED" and not any(self.direction):
+        b = 0.0
+    if b >= 1.0:
+        return 0.0
+    return 1.0 / math.sqrt((1.0 - b) * (1.0 + b))
+
+
+class RelrayCameraSettings(bpy.types.PropertyGroup):
+    """Relativistic motion of one camera (see the module docstring)."""
+
+    velocity_input: EnumProperty(
+        name="Velocity",
+        description="How the camera's velocity is given",
+        items=[
+            ("VECTOR", "Vector", "β as a 3-vector (v/c per axis)"),
+            ("SPEED", "Speed and Direction", "Speed |β| and a direction of motion"),
+        ],
+        default="VECTOR",
+    )
+    beta: FloatVectorProperty(
+        name="β",
+        description="Camera velocity v/c; |β| must stay below 1 (the speed of light)",
+        size=3,
+        subtype="XYZ",
+        min=-BETA_HARD_MAX,
+        max=BETA_HARD_MAX,
+        soft_min=-BETA_SOFT_MAX,
+        soft_max=BETA_SOFT_MAX,
+        step=1,
+        precision=4,
+        default=(0.0, 0.0, 0.0),
+    )
+    speed: FloatProperty(
+        name="Speed",
+        description="Speed |β| = v/c of the camera",
+        min=0.0,
+        max=BETA_HARD_MAX,
+        soft_max=BETA_SOFT_MAX,
+        step=1,
+        precision=4,
+        default=0.0,
+    )
+    direction: FloatVectorProperty(
+        name="Direction",
+        description="Direction of motion (normalised when used)",
+        size=3,
+        subtype="DIRECTION",
+        default=(0.0, 0.0, -1.0),
+    )
+    axes: EnumProperty(
+        name="Axes",
+        description="Axes in which β (or the direction) is given",
+        items=[
+            ("WORLD", "World", "β in world (lab) axes"),
+            ("CAMERA", "Camera", "β in the camera's local axes (-Z is the view direction)"),
+        ],
+        default="WORLD",
+    )
+    mode: EnumProperty(
+        name="Mode",
+        description="How the camera's path follows from β",
+        items=[
+            ("SNAPSHOT", "Snapshot",
+             "Each frame: a camera that has moved at the frame's constant β since ct' = 0"),
+            ("WORLDLINE", "Worldline",
+             "β integrated over proper time frame by frame: the camera really accelerates"),
+        ],
+        default="SNAPSHOT",
+    )
+    ct: FloatProperty(
+        name="ct'",
+        description=(
+            "Proper time ct' of the shutter (scene units, c = 1). Snapshot: per frame. "
+            "Worldline: the value at the scene's start frame"
+        ),
+        default=0.0,
+        step=10,
+        precision=3,
+    )
+    ct_per_frame: FloatProperty(
+        name="ct' per Frame",
+        description="Worldline mode: proper time between frames (read at the start frame)",
+        min=0.0,
+        soft_max=10.0,
+        default=0.1,
+        step=1,
+        precision=4,
+    )
+    gamma: FloatProperty(
+        name="γ",
+        description="Lorentz factor of the current β (read-only)",
+        get=_gamma_get,
+        precision=4,
+    )
+
+
+class RelraySceneSettings(bpy.types.PropertyGroup):
+    """Render settings of the Relativistic engine (the job file's [render] table)."""
+
+    samples: IntProperty(name="Samples", description="Samples per pixel", min=1,
+                         soft_max=4096, default=64)
+    max_depth: IntProperty(name="Max Bounces", description="Path segments (max_depth)",
+                           min=1, soft_max=64, default=8)
+    seed: IntProperty(name="Seed", description="Random seed (the same seed, the same image)",
+                      min=0, default=0)
+    spectral: EnumProperty(
+        name="Spectral Model",
+        description="How light is described and seen",
+        items=[
+            ("cie1931", "CIE 1931", "True spectra, 4 hero wavelengths, CIE 1931 sensor"),
+            ("seed-gaussian", "Seed Gaussian", "The seed report's Gaussian eye model"),
+            ("rgb", "RGB", "No wavelengths: geometry (aberration) only"),
+        ],
+        default="cie1931",
+    )
+    doppler: BoolProperty(name="Doppler Shift", default=True,
+                          description="Shift wavelengths by the Doppler factor D")
+    searchlight: BoolProperty(name="Searchlight", default=True,
+                              description="The D⁵ radiance transform (beaming)")
+    threads: IntProperty(name="Threads", description="Render threads (0: all cores)",
+                         min=0, soft_max=256, default=0)
+
+
+class RelrayViewLayerSettings(bpy.types.PropertyGroup):
+    """Extra passes of the Relativistic engine."""
+
+    use_pass_doppler: BoolProperty(name="Doppler", default=True,
+                                   description="Doppler factor D of the primary rays")
+    use_pass_lab_time: BoolProperty(name="Lab Time", default=True,
+                                    description="Lab time of emission of the first hit")
+
+
+classes = (RelrayCameraSettings, RelraySceneSettings, RelrayViewLayerSettings)
+
+
+def register() -> None:
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Camera.relray = PointerProperty(type=RelrayCameraSettings)
+    bpy.types.Scene.relray = PointerProperty(type=RelraySceneSettings)
+    bpy.types.ViewLayer.relray = PointerProperty(type=RelrayViewLayerSettings)
+
+
+def unregister() -> None:
+    del bpy.types.ViewLayer.relray
+    del bpy.types.Scene.relray
+    del bpy.types.Camera.relray
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,248 @@
+"""Panels of the Relativistic engine, and Blender's own panels it reuses.
+
+Our panels: Relativity (camera Object Data tab: motion, β, ct', switches, γ and the D
+range of the view, presets, velocity keyframes), Sampling, Relativity summary and
+Film (Render tab), Passes (View Layer tab), Light (light Object Data tab).
+
+Blender's panels are reused as Cycles does: "RELRAY" is added to the
+``COMPAT_ENGINES`` of every built-in panel open to any engine ("BLENDER_RENDER" in
+its set) except those for features the engine lacks, plus the EEVEE node panels for
+materials and the world (they draw the node tree, which the exporter reads).
+"""
+
+from __future__ import annotations
+
+import bpy
+
+ENGINE = "RELRAY"
+
+#: Built-in panels open to any engine that do not apply (or are replaced by ours).
+EXCLUDED_PANELS = {
+    "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_light", "NODE_DATA_PT_light",
+    "DATA_PT_preview", "MATERIAL_PT_preview", "OBJECT_PT_visibility",
+    "VIEWLAYER_PT_layer_passes", "RENDER_PT_simplify", "DATA_PT_lightprobe",
+    "DATA_PT_lightprobe_visibility", "DATA_PT_lightprobe_display", "DATA_PT_context_lightprobe",
+    "DATA_PT_lightprobe_parallax", "EEVEE_MATERIAL_PT_viewport_settings",
+}
+#: Engine-specific built-in panels that draw what the exporter reads.
+EXTRA_PANELS = ("EEVEE_MATERIAL_PT_context_material", "EEVEE_MATERIAL_PT_surface",
+                "EEVEE_WORLD_PT_surface")
+
+_added_to: list[type] = []
+
+
+def compat_panels() -> list[type]:
+    """The built-in panels the engine shows."""
+    panels = [p for p in bpy.types.Panel.__subclasses__()
+              if "BLENDER_RENDER" in getattr(p, "COMPAT_ENGINES", ())
+              and p.__name__ not in EXCLUDED_PANELS]
+    panels += [getattr(bpy.types, name) for name in EXTRA_PANELS if hasattr(bpy.types, name)]
+    return panels
+
+
+class RelrayPanel:
+    """Common poll: only for the Relativistic engine."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    COMPAT_ENGINES = {ENGINE}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+def _camera_object(context, cam_data):
+    """An object using this camera data (the scene camera first)."""
+    obj = context.scene.camera
+    if obj is not None and obj.data == cam_data:
+        return obj
+    ob = getattr(context, "object", None)
+    if ob is not None and ob.data == cam_data:
+        return ob
+    return None
+
+
+def view_readout(context, cam_data) -> str:
+    """'|β| 0.5  D 0.577–1.73' for the camera as it stands (or why not)."""
+    try:
+        from . import export, motion
+
+        obj = _camera_object(context, cam_data)
+        if obj is None:
+            return "D range: the camera is not used by an object"
+        m = export.matrix_np(obj.matrix_world)
+        beta = motion.beta_lab(motion.VelocitySettings.from_rna(cam_data.relray),
+                               motion.unit_rotation(m[:3, :3]))
+        speed = float((beta @ beta) ** 0.5)
+        if speed >= 1.0:
+            return f"|β| = {speed:.4g} ≥ 1: not renderable"
+        w, h = export.render_size(context.scene.render)
+        cam = export.camera_settings(obj, w, h)
+        lo, hi = motion.view_doppler_range(cam, beta, w, h)
+        return f"|β| {speed:.4f}   D {lo:.3f} – {hi:.3f}"
+    except Exception as e:  # noqa: BLE001 - a panel must draw whatever happens
+        return f"D range unavailable: {e}"
+
+
+class RELRAY_PT_camera_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Relativity"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return context.camera is not None and super().poll(context)
+
+    def draw(self, context):
+        layout = self.layout
+        cam = context.camera
+        s = cam.relray
+        rs = context.scene.relray
+        row = layout.row(align=True)
+        row.menu("RELRAY_MT_motion_presets", icon="PRESET")
+        row.operator("relray.add_velocity_keyframe", icon="KEY_HLT", text="Key Velocity")
+        layout.use_property_split = True
+        layout.use_property_decorate = True
+        layout.prop(s, "mode", expand=True)
+        layout.prop(s, "velocity_input", expand=True)
+        if s.velocity_input == "VECTOR":
+            layout.prop(s, "beta")
+        else:
+            layout.prop(s, "speed")
+            layout.prop(s, "direction")
+        layout.prop(s, "axes", expand=True)
+        if s.mode == "WORLDLINE":
+            layout.prop(s, "ct", text="ct' at Start Frame")
+            layout.prop(s, "ct_per_frame")
+            frame = context.scene.frame_current - context.scene.frame_start
+            layout.label(text=f"ct' this frame: {s.ct + frame * s.ct_per_frame:.4g}")
+        else:
+            layout.prop(s, "ct")
+        col = layout.column(heading="Light")
+        col.prop(rs, "doppler")
+        col.prop(rs, "searchlight")
+        layout.prop(rs, "spectral")
+        col = layout.column()
+        col.enabled = False
+        col.prop(s, "gamma")
+        layout.label(text=view_readout(context, cam), icon="INFO")
+
+
+class RELRAY_PT_sampling(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Sampling"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        rs = context.scene.relray
+        layout.prop(rs, "samples")
+        layout.prop(rs, "max_depth")
+        layout.prop(rs, "seed")
+        layout.prop(rs, "threads")
+
+
+class RELRAY_PT_relativity_summary(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Relativity"
+    bl_context = "render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        rs = context.scene.relray
+        layout.prop(rs, "spectral")
+        col = layout.column(heading="Light")
+        col.prop(rs, "doppler")
+        col.prop(rs, "searchlight")
+        obj = context.scene.camera
+        box = layout.box()
+        if obj is None or obj.type != "CAMERA":
+            box.label(text="No active camera", icon="ERROR")
+        else:
+            s = obj.data.relray
+            box.label(text=f"{obj.name}: {s.mode.lower()}, γ {s.gamma:.4f}, ct' {s.ct:.4g}",
+                      icon="CAMERA_DATA")
+            box.label(text=view_readout(context, obj.data))
+        layout.operator("relray.export_farm", icon="EXPORT")
+
+
+class RELRAY_PT_film(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Film"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(context.scene.render, "film_transparent")
+
+
+class RELRAY_PT_passes(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Passes"
+    bl_context = "view_layer"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        vl = context.view_layer
+        col = layout.column(heading="Include")
+        col.prop(vl, "use_pass_combined")
+        col.prop(vl, "use_pass_z")
+        col.prop(vl.relray, "use_pass_doppler")
+        col.prop(vl.relray, "use_pass_lab_time")
+
+
+class RELRAY_PT_light(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Light"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return context.light is not None and super().poll(context)
+
+    def draw(self, context):
+        layout = self.layout
+        light = context.light
+        layout.row().prop(light, "type", expand=True)
+        layout.use_property_split = True
+        layout.prop(light, "color")
+        layout.prop(light, "energy", text="Power" if light.type != "SUN" else "Strength")
+        if hasattr(light, "exposure"):
+            layout.prop(light, "exposure")
+        if light.type in ("POINT", "SPOT"):
+            layout.prop(light, "shadow_soft_size", text="Radius")
+        elif light.type == "AREA":
+            layout.prop(light, "shape")
+            sub = layout.column(align=True)
+            if light.shape in ("SQUARE", "DISK"):
+                sub.prop(light, "size")
+            else:
+                sub.prop(light, "size", text="Size X")
+                sub.prop(light, "size_y", text="Y")
+
+
+classes = (
+    RELRAY_PT_camera_relativity,
+    RELRAY_PT_relativity_summary,
+    RELRAY_PT_sampling,
+    RELRAY_PT_film,
+    RELRAY_PT_passes,
+    RELRAY_PT_light,
+)
+
+
+def register() -> None:
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    for panel in compat_panels():
+        if ENGINE not in panel.COMPAT_ENGINES:
+            panel.COMPAT_ENGINES.add(ENGINE)
+            _added_to.append(panel)
+
+
+def unregister() -> None:
+    for panel in _added_to:
+        panel.COMPAT_ENGINES.discard(ENGINE)
+    _added_to.clear()
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
