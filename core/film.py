@@ -56,17 +56,22 @@ Finite outputs
     weight) is dropped whole in :meth:`Film.add_samples` and counted in
     :attr:`Film.nonfinite_samples`, so one Inf cannot poison a pixel. A pixel without
     samples resolves to 0 (alpha 0). Any value still non-finite after resolving (a
-    float32 overflow) is set to 0 and counted in :attr:`FilmImage.nonfinite_values`.
+    float32 overflow) is set to 0 and counted in :attr:`FilmImage.nonfinite_values`, and
+    :meth:`Film.resolve` logs one warning on the "relray" logger saying how many (this
+    happens only for radiances beyond 3.4e38: D⁵ with |β| within ~1e-15 of 1).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+
+log = logging.getLogger("relray")
 
 LUMINANCE_FLOOR = 1e-4
 """Smallest |mean Y| used as the denominator of the relative error."""
@@ -381,6 +386,9 @@ class Film:
         if self.num_bands:
             step = self.bands[2]
             spectral = finite32((self._mean(self.sum_band) / step).reshape(h, w, self.num_bands))
+        if bad:
+            log.warning("%d output values exceed float32's range (3.4e38) and were set to 0",
+                        bad)
         return FilmImage(
             rgba=rgba,
             aovs=aovs,

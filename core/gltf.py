@@ -79,6 +79,12 @@ _COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "
                      5126: "<f4"}
 _TYPE_SIZES = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _UNSUPPORTED_EXTENSIONS = ("KHR_draco_mesh_compression", "EXT_meshopt_compression")
+#: Most numbers (count × components) one accessor may hold: 2^28 (1 GiB of float32). An
+#: accessor without a bufferView holds zeros (plus sparse values) that are not in the
+#: file at all, so a few bytes of JSON could ask for any amount of memory: those get
+#: 2^24 (64 MiB).
+MAX_ACCESSOR_VALUES = 2**28
+MAX_ZERO_ACCESSOR_VALUES = 2**24
 
 GltfResult = tuple[
     np.ndarray, np.ndarray | None, np.ndarray, list[MaterialSpec], list[LightSpec],
@@ -186,6 +192,12 @@ def _read_accessor(doc: dict[str, Any], buffers: list[bytes], index: int) -> np.
     dtype = np.dtype(_COMPONENT_DTYPES[acc["componentType"]])
     n = _TYPE_SIZES[acc["type"]]
     count = int(acc["count"])
+    has_view = "bufferView" in acc
+    limit = MAX_ACCESSOR_VALUES if has_view else MAX_ZERO_ACCESSOR_VALUES
+    if count < 0 or count * n > limit:
+        what = "" if has_view else " for an accessor without a bufferView"
+        raise _CorruptError(f"accessors[{index}]: count {count} x {n} components is beyond "
+                            f"what relray loads ({limit} numbers{what})")
     if "bufferView" in acc:
         out = _read_view(doc, buffers, acc["bufferView"], acc.get("byteOffset", 0), dtype,
                          count, n)

@@ -17,7 +17,7 @@ key                           type                 default             meaning
 ``render.spp``                int >= 1             64                  samples per pixel (cap)
 ``render.noise_threshold``    float >= 0           0.0                 adaptive sampling, 0 = off
 ``render.max_depth``          int >= 1             8                   path segments
-``render.seed``               int >= 0             0
+``render.seed``               int 0..2^63-1        0
 ``render.spectral``           str                  "cie1931"           "cie1931" | "seed-gaussian"
                                                                        | "rgb"
 ``render.doppler``            bool                 true                shift wavelengths
@@ -54,6 +54,11 @@ key                           type                 default             meaning
 
 Semantics beyond job-format.md
 ------------------------------
+- **Ranges that keep the numerics finite** (README, "Numerical limits"): every number lies
+  within ±1e15 (``MAX_ABS_NUMBER``), frame numbers within ±(2^31-1), spectral band steps
+  are >= 0.1 nm, Gaussian emission lines sit inside the 1 nm - 100 µm grid with
+  sigma >= 1e-6 x centre, and an image whose film would not fit in this machine's
+  physical memory (``render_memory_bytes``) is rejected (key ``render.height``).
 - **Camera orientation**: exactly one of ``look_at``/``up``, ``rotation`` (3x3,
   orthonormal, det +1, rows as written in the TOML) or ``matrix`` (4x4
   camera-to-world, rows as written, bottom row 0 0 0 1, any uniform or per-axis scale
@@ -89,6 +94,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -112,6 +118,27 @@ GLTF_SUFFIXES = (".glb", ".gltf")
 MAX_IMAGE_SIDE = 32768
 MAX_PIXELS = 2**28
 MAX_FRAMES = 1_000_000
+#: Frame numbers (motion.frames, keyframes, --frames) lie within ±MAX_FRAME_NUMBER.
+MAX_FRAME_NUMBER = 2**31 - 1
+#: render.seed is hashed as a 64-bit integer by the kernels (sampling.path_key).
+MAX_SEED = 2**63 - 1
+#: Largest magnitude of any number in a job. The kernels compute in float32 (largest
+#: value 3.4e38); a product of two numbers of this size (an area, emission × strength,
+#: colour × power) stays below 1e30, and an event γ·ct below 1e30 even at γ = 1.3e8.
+MAX_ABS_NUMBER = 1e15
+#: Gaussian emission lines: centre inside the spectral grid (spectrum.GRID_MIN_NM ..
+#: GRID_MAX_NM) and sigma >= MIN_LINE_SIGMA_REL x centre (narrower ones have no area on it).
+LINE_RANGE_NM = (1.0, 1.0e5)
+MIN_LINE_SIGMA_REL = 1e-6
+#: Narrowest spectral band (nm): keeps the band count, and the film, bounded.
+MIN_BAND_STEP_NM = 0.1
+#: Peak memory of a render, measured (README, "Numerical limits"): about 300 MB of fixed
+#: cost (Python, numba, Embree, wavefront buffers) plus, per pixel, the film's float64
+#: sums and the copies made while resolving and writing it: 260 bytes with the three
+#: AOVs, about 32 more per AOV or spectral band.
+MEMORY_FIXED_BYTES = 300 * 2**20
+MEMORY_BYTES_PER_PIXEL = 164
+MEMORY_BYTES_PER_PIXEL_PER_LAYER = 32
 SENSOR_RANGE_NM = (360.0, 830.0)
 #: Tolerance of the orthonormality check of camera rotations and matrices.
 ROTATION_TOL = 1e-4
@@ -370,9 +397,15 @@ def _section(data: Mapping[str, Any], ctx: _Ctx, name: str) -> dict[str, Any]:
 def _number(value: Any, ctx: _Ctx, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ctx.error(name, f"must be a number, not {_type_name(value)}")
-    x = float(value)
+    try:
+        x = float(value)
+    except OverflowError:  # an integer beyond float64's range
+        x = -math.inf if value < 0 else math.inf
     if not math.isfinite(x):
-        raise ctx.error(name, f"must be finite, not {value}")
+        raise ctx.error(name, f"must be finite, not {x}")
+    if abs(x) > MAX_ABS_NUMBER:
+        raise ctx.error(name, f"{x:g} is out of range: numbers must lie within "
+                        f"±{MAX_ABS_NUMBER:g} (relray computes in float32)")
     return x
 
 
@@ -381,9 +414,18 @@ def _check_range(
     lo_open: bool = False, hi_open: bool = False,
 ) -> None:
     if lo is not None and (x <= lo if lo_open else x < lo):
-        raise ctx.error(name, f"must be {'>' if lo_open else '>='} {lo:g} (got {x:g})")
+        raise ctx.error(name, f"must be {'>' if lo_open else '>='} {_fmt_num(lo)} "
+                        f"(got {_fmt_num(x)})")
     if hi is not None and (x >= hi if hi_open else x > hi):
-        raise ctx.error(name, f"must be {'<' if hi_open else '<='} {hi:g} (got {x:g})")
+        raise ctx.error(name, f"must be {'<' if hi_open else '<='} {_fmt_num(hi)} "
+                        f"(got {_fmt_num(x)})")
+
+
+def _fmt_num(x: float) -> str:
+    """A number for a message: %g, or the digit count of an integer too large for float."""
+    if isinstance(x, int) and abs(x) >= 10**300:
+        return f"an integer of {len(str(abs(x)))} digits"
+    return f"{x:g}"
 
 
 def _get_float(
@@ -557,7 +599,7 @@ def _parse_render(t: dict[str, Any], ctx: _Ctx) -> RenderSettings:
         spp=_get_int(t, ctx, "spp", 64, 1, 2**24),
         noise_threshold=_get_float(t, ctx, "noise_threshold", 0.0, 0.0),
         max_depth=_get_int(t, ctx, "max_depth", 8, 1, 1024),
-        seed=_get_int(t, ctx, "seed", 0, 0),
+        seed=_get_int(t, ctx, "seed", 0, 0, MAX_SEED),
         spectral=_get_str(t, ctx, "spectral", "cie1931", SPECTRAL_MODES),
         doppler=_get_bool(t, ctx, "doppler", True),
         searchlight=_get_bool(t, ctx, "searchlight", True),
@@ -603,8 +645,9 @@ def _parse_output(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> OutputSettings
         start, stop, step = (float(x) for x in _vector(t["spectral_bands"], ctx,
                                                        "spectral_bands", 3))
         lo, hi = SENSOR_RANGE_NM
-        if step <= 0:
-            raise ctx.error("spectral_bands", f"step must be > 0 nm (got {step:g})")
+        if step < MIN_BAND_STEP_NM:
+            raise ctx.error("spectral_bands", f"step must be >= {MIN_BAND_STEP_NM:g} nm "
+                            f"(got {step:g})")
         if start >= stop:
             raise ctx.error("spectral_bands", f"start {start:g} must be below stop {stop:g}")
         if start < lo or stop > hi:
@@ -711,12 +754,18 @@ def default_camera() -> CameraSettings:
 def _parse_frames(value: Any, ctx: _Ctx, name: str) -> tuple[int, int]:
     if not isinstance(value, list) or len(value) != 2:
         raise ctx.error(name, "must be [first, last], two integers")
-    first, last = (_integer(v, ctx, name) for v in value)
+    first, last = (_frame_number(v, ctx, name) for v in value)
     if last < first:
         raise ctx.error(name, f"last frame {last} is before the first frame {first}")
     if last - first >= MAX_FRAMES:
         raise ctx.error(name, f"more than {MAX_FRAMES} frames")
     return first, last
+
+
+def _frame_number(value: Any, ctx: _Ctx, name: str) -> int:
+    f = _integer(value, ctx, name)
+    _check_range(f, ctx, name, -MAX_FRAME_NUMBER, MAX_FRAME_NUMBER)
+    return f
 
 
 def _parse_keyframes(value: Any, ctx: _Ctx) -> tuple[tuple[int, np.ndarray], ...]:
@@ -727,8 +776,8 @@ def _parse_keyframes(value: Any, ctx: _Ctx) -> tuple[tuple[int, np.ndarray], ...
         kctx = ctx.sub(f"keyframes[{i}]")
         item = _as_table(item, ctx, f"keyframes[{i}]")
         _check_keys(item, kctx, ("frame", "beta"))
-        frame = _integer(_required(item, kctx, "frame", "a keyframe needs frame and beta"),
-                         kctx, "frame")
+        frame = _frame_number(_required(item, kctx, "frame",
+                                        "a keyframe needs frame and beta"), kctx, "frame")
         beta = _vector(_required(item, kctx, "beta", "a keyframe needs frame and beta"),
                        kctx, "beta", 3)
         _check_speed(beta, kctx, "beta")
@@ -808,6 +857,13 @@ def _parse_material(t: dict[str, Any], ctx: _Ctx) -> MaterialSpec:
         centre, sigma = _vector(t["emission_line"], ctx, "emission_line", 2)
         if centre <= 0 or sigma <= 0:
             raise ctx.error("emission_line", "centre and sigma must be > 0 nm")
+        lo, hi = LINE_RANGE_NM
+        if not lo < centre < hi:
+            raise ctx.error("emission_line", f"the centre must lie inside the spectral grid, "
+                            f"{lo:g}..{hi:g} nm (got {centre:g})")
+        if sigma < MIN_LINE_SIGMA_REL * centre:
+            raise ctx.error("emission_line", f"sigma must be at least {MIN_LINE_SIGMA_REL:g} "
+                            f"of the centre (got {sigma:g} nm at {centre:g} nm)")
         line = (float(centre), float(sigma))
     spectrum = None
     if "emission_spectrum" in t:
@@ -1132,6 +1188,7 @@ def _parse_job(data: Mapping[str, Any], path: Path, stack: tuple[Path, ...]) -> 
     if "spectral-exr" in output.formats and render.spectral == "rgb":
         raise ctx.error("output.formats", "spectral-exr needs a spectral mode "
                         "(render.spectral = \"cie1931\" or \"seed-gaussian\")")
+    _check_memory(render, output, ctx)
     scene = _parse_scene(data, ctx, stack)
     camera_table = _section(data, ctx, "camera")
     camera: CameraSettings | None
@@ -1141,6 +1198,39 @@ def _parse_job(data: Mapping[str, Any], path: Path, stack: tuple[Path, ...]) -> 
         camera = _parse_camera(camera_table, ctx.sub("camera"))
     return Job(path=path, render=render, output=output, camera=camera, motion=motion,
                scene=scene)
+
+
+def physical_memory_bytes() -> int | None:
+    """This machine's physical memory in bytes, or None where the OS does not say."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def render_memory_bytes(width: int, height: int, aovs: int, bands: int) -> int:
+    """Estimated peak memory of rendering one frame (see ``MEMORY_BYTES_PER_PIXEL``)."""
+    per_pixel = MEMORY_BYTES_PER_PIXEL + MEMORY_BYTES_PER_PIXEL_PER_LAYER * (aovs + bands)
+    return MEMORY_FIXED_BYTES + width * height * per_pixel
+
+
+def _check_memory(render: RenderSettings, output: OutputSettings, ctx: _Ctx) -> None:
+    """A film that cannot fit in this machine's memory is a user error, before any work."""
+    total = physical_memory_bytes()
+    if total is None:
+        return
+    bands = 0
+    if "spectral-exr" in output.formats:
+        start, stop, step = output.spectral_bands
+        bands = int(round((stop - start) / step)) + 1
+    need = render_memory_bytes(render.width, render.height, len(output.aovs), bands)
+    if need > total:
+        raise ctx.error(
+            "render.height",
+            f"{render.width} x {render.height} pixels ({len(output.aovs)} AOVs, {bands} "
+            f"spectral bands) need about {need / 2**30:.1f} GiB of memory, more than this "
+            f"machine's {total / 2**30:.1f} GiB; render a smaller image (or fewer bands)",
+        )
 
 
 def _gltf_has_camera(file: Path, job_path: Path) -> bool:

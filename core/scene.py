@@ -1,4 +1,4 @@
-"""The in-memory scene the renderer consumes: flat float32 triangle arrays.
+"""The in-memory scene the renderer consumes: flat triangle arrays.
 
 :func:`build_scene` turns a validated :class:`~relray.core.job.Job` into a
 :class:`Scene`, in this order (material ids follow the same order):
@@ -22,8 +22,23 @@ material                      black (``base_color`` 0), ``emission`` = light ``c
                               area A and radiance L emits P = π · A · L from its front
 ============================  ===============================================================
 
+**Precision.** Vertex positions stay float64 in the lab frame. The accelerator
+(:mod:`relray.core.accel`) converts them to float32 only *relative to the scene's
+bounding-box centre*, so a scene far from the world origin (a Cornell box at 10⁶ units)
+keeps the float32 resolution of its own size: 2⁻²⁴ of its extent. (Rounding absolute
+lab coordinates to float32 first would snap a scene at 10⁶ to a 1/16-unit grid.)
+
 Triangles with zero area or non-finite vertices are dropped, counted in
 ``Scene.dropped_degenerate`` and reported once as a warning on the "relray" logger.
+"Zero area" is judged on the float32 vertices relative to the bounding-box centre,
+exactly as the accelerator will store them.
+
+**Resolution warning.** The integrator offsets continuation and shadow rays by
+``max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN)`` (extent: the largest side of the
+bounding box; see ``integrator.kernel_scene``). Details smaller than that offset are
+skipped or self-shadowed. When any triangle's longest edge is below the offset,
+:func:`build_scene` logs one warning with their number (``Scene.unresolved``); the render
+stays finite.
 Shading normals are unit length; a zero or non-finite one is replaced by the face
 normal. When any part of the scene has shading normals, the rest gets its face
 normals, so ``normals`` is either complete or None.
@@ -47,12 +62,17 @@ log = logging.getLogger("relray")
 #: A triangle is degenerate when |e1 × e2| <= DEGENERATE_TOL · (|e1|² + |e2|²).
 DEGENERATE_TOL = 1e-12
 
+#: The integrator's ray offset, max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN) in scene units
+#: (mirrors ``integrator.kernel_scene``; tests/test_stress_render.py pins the two together).
+RAY_OFFSET_REL = 1e-5
+RAY_OFFSET_MIN = 1e-9
+
 
 @dataclass
 class Scene:
     """Lab-frame geometry, materials and lights of one static scene."""
 
-    triangles: np.ndarray  # float32 (T, 3, 3) lab-frame vertex positions
+    triangles: np.ndarray  # float64 (T, 3, 3) lab-frame vertex positions
     normals: np.ndarray | None  # float32 (T, 3, 3) unit per-vertex shading normals, or None
     material_ids: np.ndarray  # int32 (T,), indexes ``materials``
     materials: list[MaterialSpec]
@@ -60,6 +80,7 @@ class Scene:
     background: np.ndarray  # float64 (3,) RGB radiance of the sky
     camera: CameraSettings | None  # the glTF file's first camera, if any
     dropped_degenerate: int = 0
+    unresolved: int = 0  # triangles smaller than the ray offset (see the module docstring)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned (min, max) corners, float64 (3,) each; zeros for an empty scene."""
@@ -160,9 +181,20 @@ def area_light_material(light: LightSpec, index: int) -> MaterialSpec:
 def _drop_degenerate(
     triangles: np.ndarray, normals: np.ndarray | None, material_ids: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, int]:
-    """Remove triangles with zero area or non-finite vertices (tested in float32)."""
-    t = triangles.astype(np.float32).astype(np.float64)
-    finite = np.all(np.isfinite(t), axis=(1, 2))
+    """Remove triangles with zero area or non-finite vertices.
+
+    Tested on float32 vertices relative to the bounding-box centre of the finite
+    triangles: what the accelerator stores.
+    """
+    with np.errstate(invalid="ignore", over="ignore"):
+        finite = np.all(np.isfinite(triangles), axis=(1, 2))
+        if finite.any():
+            pts = triangles[finite].reshape(-1, 3)
+            centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        else:
+            centre = np.zeros(3)
+        t = (triangles - centre).astype(np.float32).astype(np.float64)
+        finite &= np.all(np.isfinite(t), axis=(1, 2))
     t = np.where(finite[:, None, None], t, 0.0)
     e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
     cross = np.linalg.norm(np.cross(e1, e2), axis=1)
@@ -212,16 +244,23 @@ def build_scene(job: Job) -> Scene:
     triangles, normals, material_ids = _concatenate(parts)
     triangles, normals, material_ids, dropped = _drop_degenerate(triangles, normals,
                                                                  material_ids)
+    if len(triangles) == 0:  # one message: the error says why (no warning before it)
+        why = f" (all {dropped} were degenerate)" if dropped else ""
+        raise UserError(f"the scene has no triangles{why}", key="scene", file=job.path)
     if dropped:
         log.warning("dropped %d degenerate triangles (zero area or non-finite vertices)",
                     dropped)
-    if len(triangles) == 0:
-        why = f" (all {dropped} were degenerate)" if dropped else ""
-        raise UserError(f"the scene has no triangles{why}", key="scene", file=job.path)
     if normals is not None:
         normals = _clean_normals(normals, triangles)
+    unresolved = _count_unresolved(triangles)
+    if unresolved:
+        lo, hi = triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0)
+        log.warning("%d triangles are smaller than the ray offset %.3g (1e-5 of the scene's "
+                    "extent %.3g): float32 rays cannot resolve them; they may render "
+                    "wrongly (see README, Numerical limits)", unresolved,
+                    ray_offset(float(np.max(hi - lo))), float(np.max(hi - lo)))
     return Scene(
-        triangles=np.ascontiguousarray(triangles, dtype=np.float32),
+        triangles=np.ascontiguousarray(triangles, dtype=np.float64),
         normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
         material_ids=np.ascontiguousarray(material_ids, dtype=np.int32),
         materials=materials,
@@ -229,7 +268,22 @@ def build_scene(job: Job) -> Scene:
         background=np.array(job.scene.background, dtype=np.float64),
         camera=camera,
         dropped_degenerate=dropped,
+        unresolved=unresolved,
     )
+
+
+def ray_offset(extent: float) -> float:
+    """The integrator's ray offset for a scene whose bounding box's largest side is ``extent``."""
+    return max(RAY_OFFSET_REL * extent, RAY_OFFSET_MIN)
+
+
+def _count_unresolved(triangles: np.ndarray) -> int:
+    """Triangles whose longest edge is below the ray offset (see the module docstring)."""
+    pts = triangles.reshape(-1, 3)
+    eps = ray_offset(float(np.max(pts.max(axis=0) - pts.min(axis=0))))
+    edges = triangles - np.roll(triangles, 1, axis=1)
+    longest = np.sqrt((edges * edges).sum(axis=2)).max(axis=1)
+    return int(np.count_nonzero(longest < eps))
 
 
 def _concatenate(parts: list[_Part]) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:

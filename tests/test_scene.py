@@ -61,7 +61,7 @@ def test_sphere_normals_unit_radial_and_winding_outward() -> None:
 def test_sphere_object_in_scene(tmp_path: Path) -> None:
     s = build(tmp_path, '[[objects]]\nshape = "sphere"\ncenter = [0, 0, 1]\nradius = 0.5\n'
                         'subdivisions = 2\nmaterial = "m"\n')
-    assert s.triangles.dtype == np.float32 and s.triangles.shape == (320, 3, 3)
+    assert s.triangles.dtype == np.float64 and s.triangles.shape == (320, 3, 3)
     assert s.normals is not None and s.normals.dtype == np.float32
     assert s.material_ids.dtype == np.int32
     lo, hi = s.bounds()

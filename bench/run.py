@@ -1,0 +1,208 @@
+"""Run the benchmark suite and write CSVs, plots and RESULTS.md.
+
+    .venv/bin/python -m relray.bench.run            # make bench: bench/results/, bench/RESULTS.md
+    .venv/bin/python -m relray.bench.run --quick    # make bench-quick: bench/results/quick/
+
+Sections (``--only a,b``): ``throughput`` (Cornell throughput and the stage profile),
+``scaling`` (1 against 2 threads), ``heavy`` (≥ 1 M triangles), ``beta`` (the |β|
+sweep), ``skips`` (the skip table), ``convergence`` (error against time, relray against
+Cycles, adaptive sampling).  Cycles needs ``bpy`` (5.0.1) in the environment; without
+it the Cycles series are left out and RESULTS.md says so.  Generated meshes and Cycles'
+cached references go to ``OUT/tmp`` (git-ignored).  ``python -m relray.bench.report
+--out OUT`` rewrites the plots and RESULTS.md from the CSVs without rendering.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from relray.bench import common as cm
+from relray.bench import convergence, report, skips, throughput
+
+SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "convergence")
+BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
+
+
+@dataclass
+class Plan:
+    """Sizes of every section; :data:`FULL`, :data:`QUICK` and :data:`SMOKE` below."""
+
+    name: str
+    tp_size: int = 256
+    tp_spp: int = 64
+    tp_repeat: int = 3
+    scale_spp: int = 32
+    scale_repeat: int = 3
+    heavy_triangles: int = 1_000_000
+    heavy_size: int = 256
+    heavy_spp: int = 16
+    heavy_repeat: int = 3
+    beta_size: int = 128
+    beta_spp: int = 16
+    beta_ref_factor: int = 16
+    beta_repeat: int = 3
+    skip_size: int = 128
+    skip_spp: int = 16
+    skip_ref_spp: int = 256
+    skip_repeat: int = 3
+    anim_frames: int = 24
+    anim_separate: int = 24
+    anim_spp: int = 16
+    wait_idle_s: float = 600.0
+    probe_s: float = 0.4
+    conv: convergence.ConvergenceConfig = field(default_factory=convergence.ConvergenceConfig)
+
+
+FULL = Plan("full")
+QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_repeat=1,
+             heavy_size=128, heavy_spp=8, heavy_repeat=1, beta_size=48, beta_spp=8,
+             beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
+             anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
+             conv=convergence.ConvergenceConfig(width=64, height=64, spp=[4, 8, 16, 32],
+                                                thresholds=[0.4, 0.2, 0.1], repeats=2))
+SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repeat=1,
+             heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
+             beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
+             skip_spp=2, skip_ref_spp=4, skip_repeat=1, anim_frames=0, anim_separate=0,
+             anim_spp=1, wait_idle_s=0.0, probe_s=0.05,
+             conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
+                                                thresholds=[0.5], repeats=1, ref_factor=2))
+
+
+def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECTIONS,
+        use_cycles: bool = True, log=print) -> dict[str, Any]:
+    """Run ``sections`` of ``plan``; write CSVs and meta.json into ``out``, then the report."""
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / "tmp"
+    tmp.mkdir(exist_ok=True)
+    threads = os.cpu_count() or 1
+    meta: dict[str, Any] = {"sections": {}}
+    if (out / "meta.json").exists() and set(sections) != set(SECTIONS):
+        meta = json.loads((out / "meta.json").read_text())  # a partial rerun: keep the rest
+    meta.update({"plan": plan.name, "machine": cm.machine_info(), "threads": threads,
+                 "command": " ".join(["python -m relray.bench.run", *sys.argv[1:]])})
+    t_start = time.perf_counter()
+    log(f"relray bench ({plan.name}) -> {out}; load {meta['machine']['load_average']}")
+    cm.warm_up()
+    meta["cpu_share_start"] = cm.cpu_share(seconds=plan.probe_s)
+
+    def section(name: str):
+        meta["sections"][name] = {"load_before": cm.load_average(), "t0": time.perf_counter(),
+                                  "date": time.strftime("%Y-%m-%d %H:%M")}
+        log(f"[{name}] load {cm.load_average()[0]:.2f}")
+
+    def done(name: str, **extra: Any) -> None:
+        s = meta["sections"][name]
+        s["seconds"] = time.perf_counter() - s.pop("t0")
+        s["load_after"] = cm.load_average()
+        s.update(extra)
+
+    if "throughput" in sections:
+        idle = cm.wait_for_idle(timeout=plan.wait_idle_s, log=log) if plan.wait_idle_s else {}
+        section("throughput")
+        meta["sections"]["throughput"]["wait"] = idle
+        cornell = cm.RelrayBench(cm.make_job(cm.job_dict()))
+        rows = []
+        for mode in ("cie1931", "rgb"):
+            m = throughput.measure_bench(cornell, 1, plan.tp_repeat, profile=True,
+                                         spp=plan.tp_spp, width=plan.tp_size,
+                                         height=plan.tp_size, spectral=mode)
+            m.update({"scene": "cornell", "mode": mode, "width": plan.tp_size,
+                      "height": plan.tp_size, "spp": plan.tp_spp})
+            rows.append(m)
+        cm.write_csv(out / "throughput.csv", rows)
+        cm.write_csv(out / "profile.csv", throughput.profile_table(rows[0]))
+        size = min(plan.tp_size, 128)
+        cm.write_csv(out / "shade_breakdown.csv",
+                     throughput.shade_breakdown(cornell, size, size,
+                                                fastmath=plan.name == "full"))
+        done("throughput")
+    if "scaling" in sections:
+        idle = cm.wait_for_idle(timeout=plan.wait_idle_s, log=log) if plan.wait_idle_s else {}
+        section("scaling")
+        meta["sections"]["scaling"]["wait"] = idle
+        meta["sections"]["scaling"]["cpu_share"] = cm.cpu_share(seconds=plan.probe_s)
+        cornell = cm.RelrayBench(cm.make_job(cm.job_dict()))
+        rows = throughput.thread_scaling(cornell, plan.scale_spp, plan.tp_size, plan.tp_size,
+                                         plan.scale_repeat, (1, threads) if threads > 1 else (1,),
+                                         probe_s=plan.probe_s)
+        cm.write_csv(out / "scaling.csv", rows)
+        done("scaling")
+    if "heavy" in sections:
+        section("heavy")
+        rows = throughput.heavy_scene(tmp, plan.heavy_triangles, plan.heavy_spp,
+                                      plan.heavy_size, plan.heavy_size, 1, plan.heavy_repeat)
+        cm.write_csv(out / "heavy.csv", rows)
+        done("heavy")
+    if "beta" in sections:
+        section("beta")
+        rows = throughput.beta_sweep(None, BETAS, plan.beta_spp, plan.beta_ref_factor,
+                                     plan.beta_size, plan.beta_size, threads, plan.beta_repeat)
+        cm.write_csv(out / "beta_sweep.csv", rows)
+        done("beta")
+    if "skips" in sections:
+        section("skips")
+        rows = skips.variant_rows(plan.skip_spp, plan.skip_size, plan.skip_size, threads,
+                                  plan.skip_repeat, plan.skip_ref_spp)
+        if plan.anim_frames:
+            rows += skips.animation_rows(tmp, plan.anim_frames, plan.anim_separate,
+                                         plan.anim_spp, threads)
+        if (out / "heavy.csv").exists():
+            rows.append(skips.heavy_prepare_row(cm.read_csv(out / "heavy.csv"),
+                                                plan.anim_frames))
+        cm.write_csv(out / "skips.csv", rows)
+        done("skips")
+    if "convergence" in sections:
+        section("convergence")
+        cfg = plan.conv
+        cfg.threads = threads
+        res = convergence.run(cfg, tmp, use_cycles=use_cycles, log=log)
+        cm.write_csv(out / "convergence_raw.csv", res["raw"])
+        cm.write_csv(out / "convergence_medians.csv", res["medians"])
+        cm.write_csv(out / "converged_compare.csv", res["converged"])
+        cm.write_csv(out / "equal_error.csv", convergence.equal_error(res["medians"], cfg.spp))
+        report.plot_converged(res["refs"], out / "converged.png")
+        gain = convergence.adaptive_gain(res["medians"], "cpu_s")
+        gain += convergence.adaptive_gain(res["medians"], "wall_s")
+        cm.write_csv(out / "adaptive_gain.csv", gain)
+        done("convergence", config=res["config"], cycles_version=res["cycles_version"],
+             ref_seconds=res["ref_seconds"])
+    meta["cpu_share_end"] = cm.cpu_share(seconds=plan.probe_s)
+    meta["load_end"] = cm.load_average()
+    meta["total_seconds"] = time.perf_counter() - t_start
+    (out / "meta.json").write_text(json.dumps(meta, indent=1, default=str))
+    if md is not None:
+        report.write(out, md)
+        log(f"wrote {md}")
+    log(f"done in {meta['total_seconds']:.0f} s")
+    return meta
+
+
+def main(argv: list[str] | None = None) -> None:
+    """The command line (module docstring)."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="the < 3 minute configuration")
+    ap.add_argument("--out", type=Path, help="folder for CSVs and plots")
+    ap.add_argument("--md", type=Path, help="RESULTS.md to write")
+    ap.add_argument("--only", help=f"comma-separated sections of {','.join(SECTIONS)}")
+    ap.add_argument("--no-cycles", action="store_true", help="leave Cycles out")
+    a = ap.parse_args(argv)
+    plan = QUICK if a.quick else FULL
+    out = a.out or (cm.RESULTS / "quick" if a.quick else cm.RESULTS)
+    md = a.md or (out / "RESULTS.md" if a.quick else cm.REPO / "bench" / "RESULTS.md")
+    sections = tuple(a.only.split(",")) if a.only else SECTIONS
+    bad = set(sections) - set(SECTIONS)
+    if bad:
+        ap.error(f"unknown sections {sorted(bad)}; choose from {SECTIONS}")
+    run(plan, out, md, sections, use_cycles=not a.no_cycles)
+
+
+if __name__ == "__main__":
+    main()

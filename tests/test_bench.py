@@ -1,0 +1,71 @@
+"""Smoke test of the benchmark harness (bench/): the smallest configuration end to end.
+
+No timing assertions: the benchmarks themselves run with ``make bench`` / ``make
+bench-quick``, never in ``make test``.  This only keeps the harness from rotting when the
+core's interfaces change.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from relray.bench import common, convergence, cycles_anchor, report, run, skips, throughput
+
+
+def test_metrics_and_interpolation():
+    rng = np.random.default_rng(1)
+    ref = rng.uniform(0.1, 0.9, (8, 8, 3))
+    assert common.rel_mse(ref, ref) == 0.0
+    assert common.mean_de00(ref, ref) == pytest.approx(0.0, abs=1e-9)
+    noisy = ref * (1 + 0.1 * rng.standard_normal(ref.shape))
+    # relative MSE does not depend on the exposure
+    assert common.rel_mse(2 * noisy, 2 * ref) == pytest.approx(common.rel_mse(noisy, ref))
+    # a power law e = t^-1 crosses 0.1 at t = 10, inside and outside the sampled range
+    t, _ = common.time_at_error([1, 4, 16], [1, 0.25, 1 / 16], 0.1)
+    assert t == pytest.approx(10.0)
+    t, extrapolated = common.time_at_error([1, 4], [1, 0.25], 0.01)
+    assert t == pytest.approx(100.0) and extrapolated
+    assert cycles_anchor.cycles_bounces(8) == 6 and cycles_anchor.cycles_bounces(2) == 0
+
+
+def test_toml_writer_round_trips_the_presets():
+    import tomllib
+
+    for path in (common.CORNELL, common.FLYBY):
+        data = common.job_dict(path)
+        assert tomllib.loads(common.to_toml(data)) == data
+
+
+def test_stage_meter_restores_the_core():
+    from relray.core import accel, integrator, render
+
+    before = (render.trace, integrator.shade, accel.Accel.intersect)
+    b = common.RelrayBench(common.make_job(common.job_dict(), width=8, height=8, spp=1))
+    with throughput.StageMeter(b.prep("cie1931").accel) as m:
+        b.render(threads=1)
+    assert m.rays > 0 and m.seconds["shade"] > 0
+    assert (render.trace, integrator.shade, accel.Accel.intersect) == before
+    assert not isinstance(b.prep("cie1931").accel._scene, throughput._RunProxy)
+
+
+def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
+    out = tmp_path / "results"
+    md = tmp_path / "RESULTS.md"
+    run.run(run.SMOKE, out, md, use_cycles=cycles_anchor.bpy_available(), log=lambda *a: None)
+    for name in ("throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
+                 "convergence_medians", "equal_error", "adaptive_gain", "shade_breakdown"):
+        rows = common.read_csv(out / f"{name}.csv")
+        assert rows, name
+    tp = common.read_csv(out / "throughput.csv")[0]
+    assert tp["paths"] == 16 * 16 * 2 and tp["rays"] >= tp["paths"]
+    assert math.isfinite(tp["embree_share"])
+    assert (out / "convergence.png").exists() and (out / "profile.png").exists()
+    text = md.read_text()
+    assert "## Headline" in text and "## 6. Profile" in text
+    # the report regenerates from the CSVs alone
+    report.write(out, tmp_path / "again.md")
+    assert "## 5. Skip" in (tmp_path / "again.md").read_text()
+    assert set(skips._variant_jobs()) <= {r["skip"] for r in
+                                          common.read_csv(out / "skips.csv")}
+    assert convergence.ConvergenceConfig().ref_spp == 16 * 256
