@@ -125,14 +125,15 @@ def lookup(table, row, u):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, lamu,
-          prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d, sh_t, sh_c):
+          prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d, sh_t, sh_c, sky_seen):
     """One bounce for the live rays 0 ≤ i < n (ray i belongs to path ``idx[i]``).
 
     Adds emission seen by the ray (MIS-weighted against NEE), prepares one shadow ray
     (NEE) and samples the continuation.  The continuing rays are compacted *in place*
     into the front of ``idx``, ``o`` and ``d`` (ray i is read before slot ≤ i is
     written), the shadow rays into the front of the ``sh_*`` buffers.  Returns
-    (continuing rays, shadow rays).
+    (continuing rays, shadow rays).  ``sky_seen = False`` (a transparent film) hides the
+    sky from camera rays (depth 0) only.
     """
     base = 3 + depth * 8
     n_alive = 0
@@ -145,7 +146,7 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         tri = prim[i]
         if tri < 0:
-            if sc.sky_row >= 0:
+            if sc.sky_row >= 0 and (depth > 0 or sky_seen):
                 w = 1.0
                 if depth > 0 and prev_delta[pi] == 0 and sc.sky_pmf > 0.0:
                     w = power_heuristic(prev_pdf[pi], sc.sky_pmf / (4.0 * math.pi))
@@ -400,7 +401,8 @@ spectrum_min_nm = spectrum.SENSOR_MIN_NM
 
 
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_local: np.ndarray,
-          d: np.ndarray, lamu: np.ndarray, nlanes: int) -> tuple[np.ndarray, np.ndarray]:
+          d: np.ndarray, lamu: np.ndarray, nlanes: int,
+          sky_seen: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Trace a wavefront of camera rays; returns (L (N,4) lab radiance, primary hit t).
 
     ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit.
@@ -426,7 +428,7 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_loc
             first_t = hits.t
         m, ns = shade(sc, depth, max_depth, m, idx, keys, o, d, hits.t, hits.prim, hits.u,
                       hits.v, thr, L, lamu, prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d,
-                      sh_t, sh_c)
+                      sh_t, sh_c, sky_seen)
         if ns:
             blocked = accel.occluded(sh_o[:ns], sh_d[:ns], sh_t[:ns])
             add_shadows(sh_idx[:ns], blocked, sh_c[:ns], L, nlanes)

@@ -23,6 +23,9 @@ key                           type                 default             meaning
 ``render.doppler``            bool                 true                shift wavelengths
 ``render.searchlight``        bool                 true                D^5 radiance transform
 ``render.threads``            int >= 0             0                   0 = all cores
+``render.transparent``        bool                 false               the camera does not see the
+                                                                       sky (alpha 0, no radiance);
+                                                                       the sky still lights scenes
 ``output.dir``                str                  "out"               relative: to the job file
 ``output.name``               str                  "frame_{frame:04d}" file stem, ``str.format``
                                                                        with ``frame``
@@ -160,6 +163,7 @@ class RenderSettings:
     doppler: bool = True
     searchlight: bool = True
     threads: int = 0
+    transparent: bool = False
 
 
 @dataclass(frozen=True)
@@ -554,7 +558,7 @@ def _check_speed(beta: np.ndarray, ctx: _Ctx, name: str) -> None:
 
 _TOP_KEYS = ("render", "output", "camera", "motion", "scene", "materials", "objects", "lights")
 _RENDER_KEYS = ("width", "height", "spp", "noise_threshold", "max_depth", "seed", "spectral",
-                "doppler", "searchlight", "threads")
+                "doppler", "searchlight", "threads", "transparent")
 _OUTPUT_KEYS = ("dir", "name", "formats", "spectral_bands", "aovs", "exposure")
 _CAMERA_KEYS = ("position", "look_at", "up", "rotation", "matrix", "fov", "shift")
 _MOTION_KEYS = ("mode", "beta", "ct", "frames", "ct_per_frame", "keyframes",
@@ -604,6 +608,7 @@ def _parse_render(t: dict[str, Any], ctx: _Ctx) -> RenderSettings:
         doppler=_get_bool(t, ctx, "doppler", True),
         searchlight=_get_bool(t, ctx, "searchlight", True),
         threads=_get_int(t, ctx, "threads", 0, 0, 65536),
+        transparent=_get_bool(t, ctx, "transparent", False),
     )
 
 

@@ -237,7 +237,7 @@ class FrameRenderer:
             nlanes = 4
         w_d = D**5 if self.searchlight else np.ones(n)
         L, t_hit = trace(prep.kernel, prep.accel, s.max_depth, keys, o_local, d_lab, lamu,
-                         nlanes)
+                         nlanes, sky_seen=not s.transparent)
         hit = t_hit < MISS_DISTANCE
         dist = np.where(hit, t_hit + skipped, ESCAPED_DEPTH)
         sensor = np.empty((n, 3), np.float64)

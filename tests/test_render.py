@@ -1,4 +1,4 @@
-"""Adaptive sampling: pixels stop early, and the image stays unbiased."""
+"""core/render.py: frame selection, adaptive sampling, transparent film."""
 
 import dataclasses
 from pathlib import Path
@@ -54,3 +54,42 @@ def test_adaptive_sampling_stops_converged_pixels_and_stays_unbiased():
     se = np.sqrt(((a.rel_error.ravel() * ya) ** 2 + (b.rel_error.ravel() * yb) ** 2).sum())
     se /= len(ya)
     assert abs(ya.mean() - yb.mean()) < 5 * se
+
+
+def test_transparent_film_hides_the_sky_from_the_camera_only():
+    """render.transparent: escaped camera rays give alpha 0 and no radiance, while the sky
+    still lights the scene (lit pixels are unchanged, sample for sample)."""
+    from relray.core.job import parse_job
+
+    data = {"render": {"width": 16, "height": 12, "spp": 4, "max_depth": 3},
+            "scene": {"background": [0.5, 0.6, 0.7]},
+            "materials": [{"name": "grey", "base_color": [0.5, 0.5, 0.5]}],
+            "objects": [{"shape": "sphere", "center": [0.0, 0.0, 1.0], "radius": 0.8,
+                         "material": "grey"}]}
+    images = []
+    for transparent in (False, True):
+        data["render"]["transparent"] = transparent
+        job = parse_job(data, FLYBY.parent / "job.toml")
+        prep = render.prepare(build_scene(job), "cie1931")
+        cam = PinholeCamera.from_settings(job.camera, 16, 12)
+        fr = render.FrameRenderer(prep, job.render, cam)
+        film, _ = fr.render(render.frame_events(job)[0][1], 1)
+        images.append(film.resolve(fr.to_rgb).rgba)
+    opaque, clear = images
+    sky = opaque[..., 3] == 0
+    assert sky.any() and (~sky).any()
+    assert np.all(clear[sky] == 0)                       # sky pixels: transparent black
+    assert np.all(opaque[sky][:, :3] > 0)                # ... which the opaque film shows
+    full = opaque[..., 3] == 1
+    np.testing.assert_array_equal(clear[full], opaque[full])   # lit by the sky all the same
+
+
+def test_sub_range_has_the_full_animations_shutter_events():
+    job = jobmod.load_job(FLYBY)
+    full = dict(render.frame_events(job))
+    part = render.frame_events(jobmod.with_overrides(job, frames=(40, 42)))
+    assert [f for f, _ in part] == [40, 41, 42]
+    for f, ev in part:
+        assert ev.t == full[f].t and ev.tau == full[f].tau
+        np.testing.assert_array_equal(ev.x, full[f].x)
+        np.testing.assert_array_equal(ev.beta, full[f].beta)
