@@ -32,26 +32,27 @@ EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130
 
 
-def parse_frames(text: str) -> tuple[int, int]:
-    """'A-B' or 'A' -> (A, B)."""
+def parse_frames(text: str, file: Path | None = None) -> tuple[int, int]:
+    """'A-B' or 'A' -> (A, B); errors name ``--frames`` and the job ``file``."""
     try:
         a, _, b = text.partition("-")
         first, last = int(a), int(b or a)
     except ValueError:
-        raise UserError(f"expected A-B or A, got {text!r}", key="--frames") from None
+        raise UserError(f"expected A-B or A, got {text!r}", key="--frames", file=file) from None
     if last < first:
-        raise UserError(f"last frame {last} is before first frame {first}", key="--frames")
+        raise UserError(f"last frame {last} is before first frame {first}", key="--frames",
+                        file=file)
     return first, last
 
 
-def parse_vector(text: str, key: str) -> np.ndarray:
-    """'x,y,z' -> a float64 3-vector."""
+def parse_vector(text: str, key: str, file: Path | None = None) -> np.ndarray:
+    """'x,y,z' -> a float64 3-vector; errors name ``key`` and the job ``file``."""
     try:
         v = np.array([float(x) for x in text.split(",")], np.float64)
     except ValueError:
-        raise UserError(f"expected x,y,z numbers, got {text!r}", key=key) from None
+        raise UserError(f"expected x,y,z numbers, got {text!r}", key=key, file=file) from None
     if v.shape != (3,):
-        raise UserError(f"expected three numbers x,y,z, got {text!r}", key=key)
+        raise UserError(f"expected three numbers x,y,z, got {text!r}", key=key, file=file)
     return v
 
 
@@ -102,9 +103,10 @@ def load_with_overrides(args: argparse.Namespace):
     return jobmod.with_overrides(
         job,
         spp=getattr(args, "spp", None),
-        beta=parse_vector(args.beta, "--beta") if getattr(args, "beta", None) else None,
+        beta=parse_vector(args.beta, "--beta", args.job) if getattr(args, "beta", None)
+        else None,
         ct=getattr(args, "ct", None),
-        frames=parse_frames(args.frames) if getattr(args, "frames", None) else None,
+        frames=parse_frames(args.frames, args.job) if getattr(args, "frames", None) else None,
         out=getattr(args, "out", None),
         threads=getattr(args, "threads", None),
     )

@@ -84,6 +84,7 @@ def test_bad_options_exit_2_with_one_line_and_write_nothing(tmp_path, args, key)
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and key in lines[0] and "Traceback" not in r.stderr
+    assert str(job) in lines[0]
     assert not (tmp_path / "out").exists()
 
 
