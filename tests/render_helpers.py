@@ -23,8 +23,7 @@ from relray.core import relativity
 from relray.core.camera import PinholeCamera
 from relray.core.film import FilmImage
 from relray.core.job import Job, parse_job
-from relray.core.render import FrameRenderer, frame_events, prepare, resolve_camera
-from relray.core.scene import build_scene
+from relray.core.render import build_renderer, frame_events
 
 
 @dataclass
@@ -90,15 +89,10 @@ def make_job(data: dict[str, Any], tmp_path: Path) -> Job:
 def render(data: dict[str, Any], tmp_path: Path, frame: int | None = None) -> Rendered:
     """Render one frame of the job dict (the first frame unless ``frame`` is given)."""
     job = make_job(data, tmp_path)
-    scene = build_scene(job)
-    cam = resolve_camera(job, scene)
+    renderer = build_renderer(job)
+    camera = renderer.camera
     events = dict(frame_events(job))
     f = min(events) if frame is None else frame
-    prep = prepare(scene, job.render.spectral)
-    s = job.render
-    camera = PinholeCamera.from_settings(cam, s.width, s.height)
-    bands = job.output.spectral_bands if "spectral-exr" in job.output.formats else None
-    renderer = FrameRenderer(prep, s, camera, aovs=job.output.aovs, bands=bands)
     film, _ = renderer.render(events[f], f)
     assert film.nonfinite_samples == 0
     image = film.resolve(renderer.to_rgb)

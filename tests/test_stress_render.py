@@ -48,8 +48,7 @@ from render_helpers import base_job, make_job, ndc
 from stress_config import only_in_stress, pick
 
 from relray.core import scene as scene_mod
-from relray.core.camera import PinholeCamera
-from relray.core.render import FrameRenderer, frame_events, prepare, resolve_camera
+from relray.core.render import build_renderer, frame_events, prepare
 
 pytestmark = pytest.mark.stress
 
@@ -85,16 +84,12 @@ class Result:
 def render_case(data: dict, tmp_path: Path, frame: int | None = None) -> Result:
     """Like render_helpers.render, but returns the film's counters instead of asserting."""
     job = make_job(data, tmp_path)
-    scene = scene_mod.build_scene(job)
-    cam = resolve_camera(job, scene)
+    renderer = build_renderer(job)
     events = dict(frame_events(job))
     f = min(events) if frame is None else frame
-    prep = prepare(scene, job.render.spectral)
-    s = job.render
-    camera = PinholeCamera.from_settings(cam, s.width, s.height)
-    renderer = FrameRenderer(prep, s, camera, aovs=job.output.aovs)
     film, _ = renderer.render(events[f], f)
-    return Result(film.resolve(renderer.to_rgb), film, job, camera, events[f], renderer.to_rgb)
+    return Result(film.resolve(renderer.to_rgb), film, job, renderer.camera, events[f],
+                  renderer.to_rgb)
 
 
 def with_render(data: dict, **render) -> dict:
