@@ -371,7 +371,9 @@ def subprocess_env(base: dict[str, str] | None = None) -> dict[str, str]:
 
     ``PYTHONPATH`` gets every ``sys.path`` entry of this process (inside Blender also the
     extensions folder that holds this package, and the bundled wheels), so the child
-    imports the same code as its parent.
+    imports the same code as its parent. Inside Blender the child imports these files as
+    ``relray.*``, not ``bl_ext.<repo>.relray.*``: numba's cache entries name the module,
+    so the child gets a kernel cache of its own (:func:`child_numba_cache`).
     """
     env = dict(os.environ if base is None else base)
     _, folder = _cli_module()
@@ -379,10 +381,26 @@ def subprocess_env(base: dict[str, str] | None = None) -> dict[str, str]:
     if env.get("PYTHONPATH"):
         paths.append(env["PYTHONPATH"])
     env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys(paths))
+    if folder is not None:
+        env["NUMBA_CACHE_DIR"] = child_numba_cache(env.get("NUMBA_CACHE_DIR"))
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         env.setdefault(var, "1")
     env.setdefault("PYTHONUNBUFFERED", "1")
     return env
+
+
+def child_numba_cache(parent: str | None) -> str:
+    """The numba cache of a ``relray render`` child started inside Blender.
+
+    A sub-folder of the parent's ``NUMBA_CACHE_DIR``, else of the user's cache folder
+    (``%LOCALAPPDATA%``, ``$XDG_CACHE_HOME`` or ``~/.cache``): never the parent's own
+    entries, whose pickled kernels refer to ``bl_ext`` modules the child does not have.
+    """
+    if parent:
+        return os.path.join(parent, "relray-cli")
+    root = os.environ.get("LOCALAPPDATA" if os.name == "nt" else "XDG_CACHE_HOME")
+    return os.path.join(root or os.path.join(os.path.expanduser("~"), ".cache"), "relray",
+                        "numba-cli")
 
 
 # ------------------------------------------------------------------------------ work split

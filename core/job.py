@@ -302,12 +302,17 @@ class LightSpec:
     ``spot_size``      degrees in (0, 180]    45            spot: full cone angle
     ``spot_blend``     float in [0, 1]        0.15          spot
     ``size``           float or [w, h] > 0    1             area: width (local x), height (y)
+    ``up``             [x, y, z], not         --            area: the light's local +Y (the
+                       parallel to                          height's axis), its rotation about
+                       ``direction``                        ``direction``
     ``radius``         float >= 0             0             point, spot: soft radius
     =================  =====================  ============  =====================================
 
     Stored: ``direction`` is a unit vector, ``spot_size`` is in radians, ``size`` a
-    pair. An area light's local frame is the shortest-arc rotation taking -Z to
-    ``direction`` (:func:`relray.core.shapes.frame_towards`).
+    pair, ``up`` a unit vector perpendicular to ``direction`` (or None). An area light's
+    local frame has -Z along ``direction`` and +Y along ``up``; without ``up`` it is the
+    shortest-arc rotation taking -Z to ``direction``
+    (:func:`relray.core.shapes.frame_towards`).
     """
 
     type: str
@@ -320,6 +325,7 @@ class LightSpec:
     size: tuple[float, float] = (1.0, 1.0)
     radius: float = 0.0
     name: str = ""
+    up: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -357,10 +363,15 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Ctx:
-    """Where a value lives: the file and the key prefix ("render", "materials[2]")."""
+    """Where a value lives: the file and the key prefix ("render", "materials[2]").
 
-    file: Path
+    ``clamped``: None (a job file: a number out of its range is an error), or a list:
+    numbers outside a closed range are clamped to it and noted there (the add-on).
+    """
+
+    file: Path | None
     prefix: str = ""
+    clamped: list[str] | None = None
 
     def key(self, name: str) -> str:
         return f"{self.prefix}.{name}" if self.prefix else name
@@ -369,7 +380,7 @@ class _Ctx:
         return UserError(message, key=self.key(name), file=self.file)
 
     def sub(self, name: str) -> _Ctx:
-        return _Ctx(self.file, self.key(name))
+        return _Ctx(self.file, self.key(name), self.clamped)
 
 
 def _type_name(value: Any) -> str:
@@ -416,13 +427,22 @@ def _number(value: Any, ctx: _Ctx, name: str) -> float:
 def _check_range(
     x: float, ctx: _Ctx, name: str, lo: float | None, hi: float | None,
     lo_open: bool = False, hi_open: bool = False,
-) -> None:
+) -> float:
+    """``x`` if it lies in range; else an error, or (``ctx.clamped``, closed bound) the bound."""
     if lo is not None and (x <= lo if lo_open else x < lo):
-        raise ctx.error(name, f"must be {'>' if lo_open else '>='} {_fmt_num(lo)} "
-                        f"(got {_fmt_num(x)})")
+        return _out_of_range(x, ctx, name, lo, lo_open, ">" if lo_open else ">=")
     if hi is not None and (x >= hi if hi_open else x > hi):
-        raise ctx.error(name, f"must be {'<' if hi_open else '<='} {_fmt_num(hi)} "
-                        f"(got {_fmt_num(x)})")
+        return _out_of_range(x, ctx, name, hi, hi_open, "<" if hi_open else "<=")
+    return x
+
+
+def _out_of_range(x: float, ctx: _Ctx, name: str, bound: float, is_open: bool,
+                  relation: str) -> float:
+    """The error for ``x`` beyond ``bound``, or the bound when ``ctx`` clamps (closed only)."""
+    if ctx.clamped is not None and not is_open:
+        ctx.clamped.append(f"{ctx.key(name)} = {_fmt_num(x)} clamped to {_fmt_num(bound)}")
+        return bound
+    raise ctx.error(name, f"must be {relation} {_fmt_num(bound)} (got {_fmt_num(x)})")
 
 
 def _fmt_num(x: float) -> str:
@@ -439,9 +459,7 @@ def _get_float(
 ) -> float:
     if name not in t:
         return default
-    x = _number(t[name], ctx, name)
-    _check_range(x, ctx, name, lo, hi, lo_open, hi_open)
-    return x
+    return _check_range(_number(t[name], ctx, name), ctx, name, lo, hi, lo_open, hi_open)
 
 
 def _get_opt_float(
@@ -450,9 +468,7 @@ def _get_opt_float(
 ) -> float | None:
     if name not in t:
         return None
-    x = _number(t[name], ctx, name)
-    _check_range(x, ctx, name, lo, hi, lo_open)
-    return x
+    return _check_range(_number(t[name], ctx, name), ctx, name, lo, hi, lo_open)
 
 
 def _integer(value: Any, ctx: _Ctx, name: str) -> int:
@@ -515,9 +531,7 @@ def _get_vec(
     lo: float | None = None, hi: float | None = None,
 ) -> np.ndarray:
     v = np.array(default, dtype=np.float64) if name not in t else _vector(t[name], ctx, name, n)
-    for x in v:
-        _check_range(float(x), ctx, name, lo, hi)
-    return v
+    return np.array([_check_range(float(x), ctx, name, lo, hi) for x in v], dtype=np.float64)
 
 
 def _vec_or_scalar(value: Any, ctx: _Ctx, name: str, n: int) -> np.ndarray:
@@ -578,7 +592,7 @@ _LIGHT_KEYS: dict[str, tuple[str, ...]] = {
     "spot": ("type", "name", "position", "direction", "color", "power", "spot_size",
              "spot_blend", "radius"),
     "sun": ("type", "name", "position", "direction", "color", "power"),
-    "area": ("type", "name", "position", "direction", "color", "power", "size"),
+    "area": ("type", "name", "position", "direction", "color", "power", "size", "up"),
 }
 
 DEFAULT_CAMERA_POSITION = (0.0, -3.9, 1.0)
@@ -1040,6 +1054,7 @@ def _parse_light(t: dict[str, Any], ctx: _Ctx) -> LightSpec:
         if np.any(s <= 0):
             raise ctx.error("size", "must be > 0")
         size = (float(s[0]), float(s[1]))
+    up = _light_up(t, ctx, direction / norm) if "up" in t else None
     return LightSpec(
         type=kind,
         position=_frozen(_get_vec(t, ctx, "position", (0.0, 0.0, 0.0))),
@@ -1051,7 +1066,62 @@ def _parse_light(t: dict[str, Any], ctx: _Ctx) -> LightSpec:
         size=size,
         radius=_get_float(t, ctx, "radius", 0.0, 0.0),
         name=_get_str(t, ctx, "name", ""),
+        up=up,
     )
+
+
+#: Least sine of the angle between an area light's ``up`` and its ``direction``.
+MIN_UP_SINE = 1e-6
+
+
+def _light_up(t: Mapping[str, Any], ctx: _Ctx, direction: np.ndarray) -> np.ndarray:
+    """An area light's ``up``, made perpendicular to the unit ``direction`` and unit length."""
+    up = _vector(t["up"], ctx, "up", 3)
+    norm = float(np.linalg.norm(up))
+    if norm == 0.0:
+        raise ctx.error("up", "must not be zero")
+    perp = up / norm - float(up @ direction / norm) * direction
+    sine = float(np.linalg.norm(perp))
+    if sine < MIN_UP_SINE:
+        raise ctx.error("up", "is parallel to direction: it must give the light's rotation "
+                        "about its direction (its local +Y)")
+    return _frozen(perp / sine)
+
+
+def material_from_dict(d: Mapping[str, Any], key_prefix: str = "",
+                       file: str | Path | None = None,
+                       clamped: list[str] | None = None) -> MaterialSpec:
+    """Validate one material given as a dict (a ``[[materials]]`` table) from Python.
+
+    The same checks and one-line errors as a job file, keys named ``key_prefix.key``;
+    tuples and numpy values are accepted. ``clamped``: when a list is given, numbers
+    outside a closed range (a base colour above 1, an IOR below 1) are clamped into it
+    instead of rejected, and each clamp is appended to the list as a sentence.
+    """
+    return _parse_material(_table_from_python(d, key_prefix, file),
+                           _Ctx(_opt_path(file), key_prefix, clamped))
+
+
+def light_from_dict(d: Mapping[str, Any], key_prefix: str = "",
+                    file: str | Path | None = None,
+                    clamped: list[str] | None = None) -> LightSpec:
+    """Validate one light given as a dict (a ``[[lights]]`` table, angles in degrees).
+
+    As :func:`material_from_dict`: the job file's checks and errors, optional clamping.
+    """
+    return _parse_light(_table_from_python(d, key_prefix, file),
+                        _Ctx(_opt_path(file), key_prefix, clamped))
+
+
+def _table_from_python(d: Any, key_prefix: str, file: str | Path | None) -> dict[str, Any]:
+    if not isinstance(d, Mapping):
+        raise UserError(f"must be a table, not {_type_name(d)}", key=key_prefix or None,
+                        file=file)
+    return _plain(dict(d))
+
+
+def _opt_path(file: str | Path | None) -> Path | None:
+    return None if file is None else Path(file)
 
 
 def _array_of_tables(data: Mapping[str, Any], ctx: _Ctx, name: str) -> list[dict[str, Any]]:

@@ -11,11 +11,16 @@
 3. the job's ``[[lights]]``: point, spot and sun lights are passed on; each **area
    light becomes an emissive quad** with its own material.
 
+Steps 3 and after (area lights, degenerate triangles, normals, the resolution warning)
+are :func:`scene_from_parts`, public for callers that bring their own triangle arrays
+and specs (the Blender add-on).
+
 ============================  ===============================================================
 area light ->                 emissive quad
 ============================  ===============================================================
 geometry                      ``size[0]`` × ``size[1]`` rectangle at ``position``, front face
-                              towards ``direction`` (:func:`relray.core.shapes.area_light_quad`)
+                              towards ``direction``, height along ``up`` when given
+                              (:func:`relray.core.shapes.area_light_quad`)
 material                      black (``base_color`` 0), ``emission`` = light ``color``,
                               ``one_sided_emission`` = true
 ``emission_strength``         L = P / (π · A), as Blender/Cycles: a Lambertian emitter of
@@ -48,6 +53,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -233,11 +239,43 @@ def build_scene(job: Job) -> Scene:
     for i, obj in enumerate(job.scene.objects):
         tris, norms = tessellate(obj, f"objects[{i}]", job.path)
         parts.append(_Part(tris, norms, ids[obj.material]))
-    for i, light in enumerate(job.scene.lights):
+    triangles, normals, material_ids = _concatenate(parts)
+    return scene_from_parts(triangles, normals, material_ids, materials,
+                            [*lights, *job.scene.lights], job.scene.background, camera,
+                            file=job.path)
+
+
+def scene_from_parts(
+    triangles: np.ndarray, normals: np.ndarray | None, material_ids: np.ndarray | int,
+    materials: Sequence[MaterialSpec], lights: Sequence[LightSpec],
+    background: Sequence[float], camera: CameraSettings | None = None, *,
+    file: str | Path | None = None,
+) -> Scene:
+    """A :class:`Scene` from triangle arrays and specs: what :func:`build_scene` does to
+    a job's geometry once it is read (for callers with their own geometry: the add-on).
+
+    ``triangles`` (T, 3, 3) lab positions; ``normals`` (T, 3, 3) shading normals or
+    None; ``material_ids`` (T,) (or one id for all) index ``materials``; ``lights`` may
+    hold area lights. In order: every area light becomes an emissive quad (appended
+    after the triangles, its material after ``materials``; the scene keeps the point,
+    spot and sun lights), degenerate triangles are dropped (counted in
+    ``Scene.dropped_degenerate``, one warning), shading normals are made unit length,
+    and triangles below the ray offset are counted (one warning). No triangle left is a
+    UserError (key ``scene``, naming ``file``).
+    """
+    tris = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
+    ids = np.broadcast_to(np.asarray(material_ids, dtype=np.int32), (len(tris),))
+    if len(ids) and (ids.min() < 0 or ids.max() >= len(materials)):
+        raise ValueError(f"material ids {ids.min()}..{ids.max()} do not index "
+                         f"{len(materials)} materials")
+    parts = [_Part(tris, None if normals is None else
+                   np.asarray(normals, dtype=np.float64).reshape(-1, 3, 3), ids)]
+    materials, kept_lights = list(materials), []
+    for i, light in enumerate(lights):
         if light.type != "area":
-            lights.append(light)
+            kept_lights.append(light)
             continue
-        quad = shapes.area_light_quad(light.position, light.direction, light.size)
+        quad = shapes.area_light_quad(light.position, light.direction, light.size, light.up)
         parts.append(_Part(quad, None, len(materials)))
         materials.append(area_light_material(light, i))
 
@@ -246,7 +284,7 @@ def build_scene(job: Job) -> Scene:
                                                                  material_ids)
     if len(triangles) == 0:  # one message: the error says why (no warning before it)
         why = f" (all {dropped} were degenerate)" if dropped else ""
-        raise UserError(f"the scene has no triangles{why}", key="scene", file=job.path)
+        raise UserError(f"the scene has no triangles{why}", key="scene", file=file)
     if dropped:
         log.warning("dropped %d degenerate triangles (zero area or non-finite vertices)",
                     dropped)
@@ -264,8 +302,8 @@ def build_scene(job: Job) -> Scene:
         normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
         material_ids=np.ascontiguousarray(material_ids, dtype=np.int32),
         materials=materials,
-        lights=lights,
-        background=np.array(job.scene.background, dtype=np.float64),
+        lights=kept_lights,
+        background=np.array(background, dtype=np.float64),
         camera=camera,
         dropped_degenerate=dropped,
         unresolved=unresolved,

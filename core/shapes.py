@@ -178,15 +178,21 @@ def face_normals(triangles: np.ndarray) -> np.ndarray:
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
-def frame_towards(direction: np.ndarray) -> np.ndarray:
+def frame_towards(direction: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
     """(3, 3) rotation whose column 2 is ``-direction``: a light's local frame.
 
-    Blender lights shine along their local -Z. This is the shortest-arc rotation
-    taking -Z to ``direction`` (the identity for a light pointing down), and a half
-    turn about +x for a light pointing straight up.
+    Blender lights shine along their local -Z. With ``up`` (not parallel to
+    ``direction``), column 1 (local +Y) is ``up`` made perpendicular to it. Without, this
+    is the shortest-arc rotation taking -Z to ``direction`` (the identity for a light
+    pointing down), and a half turn about +x for a light pointing straight up.
     """
     d = np.asarray(direction, dtype=np.float64)
     d = d / np.linalg.norm(d)
+    if up is not None:
+        y = np.asarray(up, dtype=np.float64)
+        y = y - (y @ d) * d
+        y = y / np.linalg.norm(y)
+        return np.column_stack([np.cross(y, -d), y, -d])
     down = np.array([0.0, 0.0, -1.0])
     axis = np.cross(down, d)
     s, c = float(np.linalg.norm(axis)), float(down @ d)
@@ -198,14 +204,15 @@ def frame_towards(direction: np.ndarray) -> np.ndarray:
 
 
 def area_light_quad(
-    position: np.ndarray, direction: np.ndarray, size: tuple[float, float]
+    position: np.ndarray, direction: np.ndarray, size: tuple[float, float],
+    up: np.ndarray | None = None,
 ) -> np.ndarray:
     """Two triangles (2, 3, 3) of a ``size[0]`` × ``size[1]`` rectangle facing ``direction``.
 
     The width runs along the light's local +x, the height along its local +y
-    (:func:`frame_towards`), as for a Blender area light.
+    (:func:`frame_towards`, turned by ``up``), as for a Blender area light.
     """
-    frame = frame_towards(direction)
+    frame = frame_towards(direction, up)
     hx = 0.5 * size[0] * frame[:, 0]
     hy = 0.5 * size[1] * frame[:, 1]
     p = np.asarray(position, dtype=np.float64)

@@ -3,14 +3,16 @@
 ==================  ===================================================================
 module              owns
 ==================  ===================================================================
-``properties``      the data: camera Relativity settings, scene render settings, passes
+``properties``      the data: camera Relativity settings, scene render settings, passes,
+                    the add-on's preferences (the farm's scheduler)
 ``ui``              panels, and Blender's panels reused through COMPAT_ENGINES
-``operators``       velocity keyframe, motion presets, export for farm
+``operators``       velocity keyframe, motion presets, export for farm, render on farm
 ``engine``          the "Relativistic" RenderEngine (bl_idname "RELRAY"): hands off to
                     the core
 ``export``          depsgraph → core Scene (pure numpy out of bpy)
 ``motion``          β and shutter events per frame (snapshot / worldline)
 ``farm``            scene.glb + job TOML for ``relray render``
+``farm_run``        ``relray render`` in a child process: JSON progress, cancel (no bpy)
 ``presets``         the TOML motion profiles of presets/motion
 ``packaging``       building the extension zips (a tool for make; not loaded by Blender)
 ==================  ===================================================================

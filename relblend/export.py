@@ -4,7 +4,11 @@ Nothing of bpy leaks into the core: meshes leave as float64 arrays (through
 ``foreach_get`` into preallocated buffers), materials as
 :class:`relray.core.job.MaterialSpec`, lights as :class:`relray.core.job.LightSpec`,
 the camera as :class:`relray.core.job.CameraSettings`, and the whole scene as a
-:class:`relray.core.scene.Scene`.
+:class:`relray.core.scene.Scene`. Materials and lights are read into job tables and
+validated by the core (``core.job.material_from_dict``, ``light_from_dict``; values
+beyond a job's ranges are clamped with a warning), and the scene is assembled by
+``core.scene.scene_from_parts`` (area lights to quads, degenerate triangles dropped,
+normals made unit), exactly as for a job file.
 
 What is exported, and how
 -------------------------
@@ -33,9 +37,10 @@ other nodes              the socket's own value, or the viewport display colour,
 point / spot / sun       position, direction (-Z), colour, power in Blender's units (W;
 light                    sun: W/m²) × 2^exposure, radius, spot size and blend; colour ×
                          the blackbody colour when "temperature" is used
-area light               an emissive one-sided quad with the object's exact transform,
-                         radiance L = P / (π A) (as the core does for [[lights]] area);
-                         disk and ellipse become the rectangle of the same area (warned)
+area light               a ``[[lights]]`` area light: position, direction (-Z), up (+Y)
+                         and size under the object's transform; the core makes it an
+                         emissive one-sided quad of radiance L = P / (π A); disk and
+                         ellipse become the rectangle of the same area (warned)
 world                    Background colour × strength (constant sky), or ``world.color``
 camera                   perspective: world matrix (scale removed), lens and sensor fit →
                          vertical FOV, shift converted to the core's units (the larger
@@ -50,20 +55,20 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from ..core import job as core_job
-from ..core import shapes, spectrum
-from ..core.scene import Scene
+from ..core import spectrum
+from ..core.errors import UserError
+from ..core.scene import Scene, scene_from_parts
 
 #: Object types that ``to_mesh`` turns into triangles.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 #: Blender's default surface (no material): as the core's glTF default.
-DEFAULT_MATERIAL = core_job.MaterialSpec(name="relray_default", base_color=(0.8, 0.8, 0.8),
-                                         roughness=0.5, metallic=0.0)
-#: A triangle is degenerate when |e1 × e2| <= DEGENERATE_TOL · (|e1|² + |e2|²) (as the core).
-DEGENERATE_TOL = 1e-12
+DEFAULT_MATERIAL = core_job.material_from_dict(
+    {"name": "relray_default", "base_color": (0.8, 0.8, 0.8), "roughness": 0.5})
 
 
 def node_tree(id_data):
@@ -249,10 +254,6 @@ def _first_input(node, *names: str):
     return names[0]
 
 
-def _clamp01(x: float) -> float:
-    return float(min(max(x, 0.0), 1.0))
-
-
 def _emission(color: np.ndarray, strength: float) -> tuple[tuple[float, float, float], float]:
     """Emission colour in [0, 1] with the scale moved into the strength (as glTF stores it)."""
     c = np.maximum(np.asarray(color, np.float64), 0.0)
@@ -266,8 +267,27 @@ def material_spec(mat, warnings: Warnings) -> core_job.MaterialSpec:
     """The core material of a Blender material (see the module table)."""
     if mat is None:
         return DEFAULT_MATERIAL
+    r = _Reader(f"material '{mat.name_full}'", warnings)
+    return validated(core_job.material_from_dict, _material_values(mat, r), r)
+
+
+def validated(parse: Callable[..., Any], table: dict[str, Any], r: _Reader) -> Any:
+    """A core spec from a job table, through the job format's own validator
+    (``core.job.material_from_dict`` or ``light_from_dict``): values outside a range
+    (Blender's sockets allow more) are clamped into it, with a warning each."""
+    clamped: list[str] = []
+    try:
+        spec = parse(table, "", clamped=clamped)
+    except UserError as e:
+        raise ExportError(f"{r.label}: {e}") from None
+    for note in clamped:
+        r.warn(f"{note} (outside the range relray renders)")
+    return spec
+
+
+def _material_values(mat, r: _Reader) -> dict[str, Any]:
+    """The ``[[materials]]`` table of a Blender material, as read (not yet validated)."""
     name = mat.name_full
-    r = _Reader(f"material '{name}'", warnings)
     tree = node_tree(mat)
     surface = None
     if tree is not None:
@@ -278,14 +298,14 @@ def material_spec(mat, warnings: Warnings) -> core_job.MaterialSpec:
         if tree is not None:
             r.warn("no surface shader connected to the Material Output: using the viewport "
                    "display colour")
-        return _spec(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
+        return _values(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
     kind = surface.type
     if kind in ("MIX_SHADER", "ADD_SHADER"):
         inputs = [s for s in surface.inputs if s.type == "SHADER"]
         shaders = [n for n in (_linked_node(s) for s in inputs) if n is not None]
         r.warn(f"'{surface.bl_idname}' is not supported: using its first shader only")
         if not shaders:
-            return _spec(name, mat.diffuse_color[:3], 0.5, 0.0)
+            return _values(name, mat.diffuse_color[:3], 0.5, 0.0)
         surface, kind = shaders[0], shaders[0].type
     if kind == "BSDF_PRINCIPLED":
         base = r.color(surface, "Base Color", (0.8, 0.8, 0.8))
@@ -301,7 +321,7 @@ def material_spec(mat, warnings: Warnings) -> core_job.MaterialSpec:
         if surface.inputs.get("Normal") is not None and surface.inputs["Normal"].is_linked:
             r.warn("normal and bump maps are not supported and are ignored")
         emission, em_strength = _emission(em_color, strength)
-        return _spec(
+        return _values(
             name, base,
             roughness=r.value(surface, "Roughness", 0.5),
             metallic=r.value(surface, "Metallic", 0.0),
@@ -312,43 +332,33 @@ def material_spec(mat, warnings: Warnings) -> core_job.MaterialSpec:
     if kind == "EMISSION":
         color = r.color(surface, "Color", (1.0, 1.0, 1.0), emission=True)
         emission, em_strength = _emission(color, r.value(surface, "Strength", 1.0))
-        return _spec(name, (0.0, 0.0, 0.0), roughness=1.0, emission=emission,
-                     emission_strength=em_strength, blackbody=r.blackbody)
+        return _values(name, (0.0, 0.0, 0.0), roughness=1.0, emission=emission,
+                       emission_strength=em_strength, blackbody=r.blackbody)
     if kind == "BSDF_DIFFUSE":
-        return _spec(name, r.color(surface, "Color", (0.8, 0.8, 0.8)), roughness=1.0)
+        return _values(name, r.color(surface, "Color", (0.8, 0.8, 0.8)), roughness=1.0)
     if kind in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
-        return _spec(name, r.color(surface, "Color", (0.8, 0.8, 0.8)),
-                     roughness=r.value(surface, "Roughness", 0.5), metallic=1.0)
+        return _values(name, r.color(surface, "Color", (0.8, 0.8, 0.8)),
+                       roughness=r.value(surface, "Roughness", 0.5), metallic=1.0)
     if kind == "BSDF_GLASS":
-        return _spec(name, r.color(surface, "Color", (1.0, 1.0, 1.0)),
-                     roughness=r.value(surface, "Roughness", 0.0), transmission=1.0,
-                     ior=r.value(surface, "IOR", 1.5))
+        return _values(name, r.color(surface, "Color", (1.0, 1.0, 1.0)),
+                       roughness=r.value(surface, "Roughness", 0.0), transmission=1.0,
+                       ior=r.value(surface, "IOR", 1.5))
     r.warn(f"surface shader '{surface.bl_idname}' is not supported: using the viewport "
            "display colour")
-    return _spec(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
+    return _values(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
 
 
-def _spec(name: str, base, roughness: float = 0.5, metallic: float = 0.0,
-          transmission: float = 0.0, ior: float = 1.5,
-          emission=(0.0, 0.0, 0.0), emission_strength: float = 0.0,
-          blackbody: float | None = None) -> core_job.MaterialSpec:
-    """A MaterialSpec with every value inside the job format's ranges."""
-    base = tuple(_clamp01(float(x)) for x in base)
+def _values(name: str, base, roughness: float = 0.5, metallic: float = 0.0,
+            transmission: float = 0.0, ior: float = 1.5,
+            emission=(0.0, 0.0, 0.0), emission_strength: float = 0.0,
+            blackbody: float | None = None) -> dict[str, Any]:
+    """A ``[[materials]]`` table (a blackbody emits white × its Planck spectrum)."""
+    table = {"name": name, "base_color": tuple(base), "roughness": roughness,
+             "metallic": metallic, "transmission": transmission, "ior": ior,
+             "emission": tuple(emission), "emission_strength": emission_strength}
     if blackbody is not None and emission_strength > 0.0:
-        emission = (1.0, 1.0, 1.0)
-    else:
-        blackbody = None
-    return core_job.MaterialSpec(
-        name=name,
-        base_color=base,
-        roughness=_clamp01(roughness),
-        metallic=_clamp01(metallic),
-        transmission=_clamp01(transmission),
-        ior=float(min(max(ior, 1.0), 100.0)),
-        emission=tuple(max(float(x), 0.0) for x in emission),
-        emission_strength=max(float(emission_strength), 0.0),
-        emission_blackbody=None if blackbody is None else float(min(blackbody, 1e9)),
-    )
+        table.update(emission=(1.0, 1.0, 1.0), emission_blackbody=blackbody)
+    return table
 
 
 # ------------------------------------------------------------------------- lights
@@ -368,7 +378,7 @@ def _light_color(light, warnings: Warnings) -> np.ndarray:
         color = color * (rgb / y if y > 0 else 1.0)
     if getattr(light, "use_nodes", False) and light.node_tree is not None:
         warnings.add(f"light '{light.name}': light nodes are ignored")
-    return np.maximum(color, 0.0)
+    return color
 
 
 def light_power(light) -> float:
@@ -377,59 +387,59 @@ def light_power(light) -> float:
 
 
 def light_spec(obj_eval, matrix: np.ndarray, warnings: Warnings) -> core_job.LightSpec | None:
-    """A point, spot or sun light (None for area lights: see :func:`area_light_quad`)."""
+    """A point, spot, sun or area light, validated by the core (None: not rendered)."""
     light = obj_eval.data
     m = np.asarray(matrix, np.float64)
-    direction = -m[:3, 2]
-    norm = float(np.linalg.norm(direction))
-    direction = direction / norm if norm > 0 else np.array([0.0, 0.0, -1.0])
-    common = dict(position=_frozen(m[:3, 3]), direction=_frozen(direction),
-                  color=_frozen(_light_color(light, warnings)),
-                  power=max(light_power(light), 0.0), name=obj_eval.name)
-    if light.type == "POINT":
-        return core_job.LightSpec(type="point", radius=float(light.shadow_soft_size), **common)
+    r = _Reader(f"light '{obj_eval.name}'", warnings)
+    if light.type not in ("POINT", "SPOT", "SUN", "AREA"):
+        return None
+    table: dict[str, Any] = {"type": light.type.lower(), "name": obj_eval.name,
+                             "position": m[:3, 3], "color": _light_color(light, warnings),
+                             "power": light_power(light)}
+    if light.type in ("POINT", "SPOT"):
+        table["radius"] = float(light.shadow_soft_size)
+    if light.type in ("SPOT", "SUN"):
+        table["direction"] = _light_direction(m)
     if light.type == "SPOT":
-        return core_job.LightSpec(type="spot", radius=float(light.shadow_soft_size),
-                                  spot_size=float(min(max(light.spot_size, 1e-4), math.pi)),
-                                  spot_blend=_clamp01(light.spot_blend), **common)
-    if light.type == "SUN":
-        return core_job.LightSpec(type="sun", **common)
-    return None
+        table.update(spot_size=math.degrees(light.spot_size), spot_blend=light.spot_blend)
+    if light.type == "AREA":
+        area = _area_table(light, m, r)
+        if area is None:
+            return None
+        table.update(area)
+    return validated(core_job.light_from_dict, table, r)
 
 
-@dataclass
-class AreaLight:
-    """An area light as the core renders it: an emissive one-sided quad."""
-
-    corners: np.ndarray  # float64 (4, 3), front face (c1-c0)×(c2-c0) along the light
-    material: core_job.MaterialSpec
+def _light_direction(m: np.ndarray) -> np.ndarray:
+    """Where a light shines: its local -Z (straight down for a zero-scaled object)."""
+    d = -m[:3, 2]
+    return d if float(np.linalg.norm(d)) > 0.0 else np.array([0.0, 0.0, -1.0])
 
 
-def area_light(obj_eval, matrix: np.ndarray, warnings: Warnings) -> AreaLight:
-    """The quad of an area light, exact in position, size and rotation."""
-    light = obj_eval.data
+def _area_table(light, m: np.ndarray, r: _Reader) -> dict[str, Any] | None:
+    """An area light's direction, up (its local +Y) and size under the object's transform.
+
+    The rectangle spans the transformed local X and Y axes; a sheared transform keeps
+    the height along Y and the area. Disk and ellipse become the rectangle of the same
+    area. None (with a warning) when it has no area.
+    """
     shape = light.shape
     w = float(light.size)
     h = float(light.size_y) if shape in ("RECTANGLE", "ELLIPSE") else w
     if shape in ("DISK", "ELLIPSE"):
         k = math.sqrt(math.pi) / 2.0  # the rectangle of the same area
         w, h = w * k, h * k
-        warnings.add(f"light '{obj_eval.name}': {shape.lower()} area lights are rendered as "
-                     "rectangles of the same area")
+        r.warn(f"{shape.lower()} area lights are rendered as rectangles of the same area")
     if getattr(light, "spread", math.pi) < math.pi - 1e-6:
-        warnings.add(f"light '{obj_eval.name}': area light spread is not supported (180°)")
-    local = np.array([[-w / 2, -h / 2, 0.0], [-w / 2, h / 2, 0.0],
-                      [w / 2, h / 2, 0.0], [w / 2, -h / 2, 0.0]])
-    m = np.asarray(matrix, np.float64)
-    corners = local @ m[:3, :3].T + m[:3, 3]
-    area = float(np.linalg.norm(np.cross(corners[1] - corners[0], corners[3] - corners[0])))
-    color = _light_color(light, warnings)
-    radiance = light_power(light) / (math.pi * area) if area > 0 else 0.0
-    emission, strength = _emission(color, radiance)
-    mat = core_job.MaterialSpec(
-        name=f"area_light:{obj_eval.name}", base_color=(0.0, 0.0, 0.0), roughness=1.0,
-        emission=emission, emission_strength=strength, one_sided_emission=True)
-    return AreaLight(corners, mat)
+        r.warn("area light spread is not supported (180°)")
+    x, y = m[:3, 0], m[:3, 1]
+    normal = np.cross(x, y)
+    y_len, n_len = float(np.linalg.norm(y)), float(np.linalg.norm(normal))
+    if w * h <= 0.0 or n_len <= 0.0:
+        r.warn("the area light has no area and is not rendered")
+        return None
+    return {"direction": normal if float(normal @ m[:3, 2]) < 0.0 else -normal,  # local -Z
+            "up": y, "size": (w * n_len / y_len, h * y_len)}
 
 
 # -------------------------------------------------------------------- world, camera
@@ -510,7 +520,7 @@ class ExportedScene:
     height: int
     warnings: Warnings
     material_triangles: dict[str, np.ndarray]  # material name -> (K, 3, 3) world triangles
-    area_lights: list[AreaLight]
+    lights: list[core_job.LightSpec]  # as a job's [[lights]]: area lights too (quads in scene)
     seconds: float = 0.0
     instances: int = 0
 
@@ -568,7 +578,6 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
 
     b = _Builder(warnings)
     lights: list[core_job.LightSpec] = []
-    areas: list[AreaLight] = []
     cache: dict[tuple, tuple[MeshArrays, list]] = {}
     count = 0
     for inst in depsgraph.object_instances:
@@ -580,12 +589,9 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
             continue
         matrix = matrix_np(inst.matrix_world)  # copy now: the item dies after this step
         if obj.type == "LIGHT":
-            if obj.data.type == "AREA":
-                areas.append(area_light(obj, matrix, warnings))
-            else:
-                spec = light_spec(obj, matrix, warnings)
-                if spec is not None:
-                    lights.append(spec)
+            spec = light_spec(obj, matrix, warnings)
+            if spec is not None:
+                lights.append(spec)
             continue
         if obj.type not in GEOMETRY_TYPES:
             if obj.type in ("CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL", "GPENCIL"):
@@ -609,51 +615,16 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
         tris, normals = transform(arrays, matrix)
         b.add(tris, normals, slot_ids[idx])
 
-    for area in areas:
-        quad = shapes.quad(area.corners)
-        b.materials.append(area.material)
-        b.add(quad, np.repeat(shapes.face_normals(quad)[:, None, :], 3, axis=1),
-              np.full(len(quad), len(b.materials) - 1))
-
-    if not b.tris:
-        raise ExportError("the scene has no geometry to render")
-    triangles = np.concatenate(b.tris)
-    normals = np.concatenate(b.normals)
-    ids = np.concatenate(b.ids)
-    triangles, normals, ids = _drop_degenerate(triangles, normals, ids)
-    if len(triangles) == 0:
-        raise ExportError("the scene has no geometry to render (all triangles degenerate)")
-    normals = _clean_normals(normals, triangles)
-    core_scene = Scene(
-        triangles=np.ascontiguousarray(triangles, np.float32),
-        normals=np.ascontiguousarray(normals, np.float32),
-        material_ids=np.ascontiguousarray(ids, np.int32),
-        materials=b.materials,
-        lights=lights,
-        background=world_background(scene.world, warnings),
-        camera=camera,
-    )
-    by_material = {m.name: triangles[ids == i] for i, m in enumerate(b.materials)}
-    return ExportedScene(core_scene, camera, width, height, warnings, by_material, areas,
+    empty = np.zeros((0, 3, 3))
+    try:  # area lights become quads, degenerate triangles go, normals made unit: the core
+        core_scene = scene_from_parts(
+            np.concatenate(b.tris) if b.tris else empty,
+            np.concatenate(b.normals) if b.normals else empty,
+            np.concatenate(b.ids) if b.ids else np.zeros(0, np.int32),
+            b.materials, lights, world_background(scene.world, warnings), camera)
+    except UserError as e:
+        raise ExportError(f"the scene has no geometry to render ({e.detail})") from None
+    by_material = {m.name: core_scene.triangles[core_scene.material_ids == i]
+                   for i, m in enumerate(core_scene.materials)}
+    return ExportedScene(core_scene, camera, width, height, warnings, by_material, lights,
                          seconds=time.perf_counter() - t0, instances=count)
-
-
-def _drop_degenerate(tris: np.ndarray, normals: np.ndarray, ids: np.ndarray):
-    """Remove zero-area or non-finite triangles (tested in float32, as the core)."""
-    t = tris.astype(np.float32).astype(np.float64)
-    finite = np.all(np.isfinite(t), axis=(1, 2))
-    t = np.where(finite[:, None, None], t, 0.0)
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    cross = np.linalg.norm(np.cross(e1, e2), axis=1)
-    keep = finite & (cross > DEGENERATE_TOL * ((e1 * e1).sum(1) + (e2 * e2).sum(1))) \
-        & (cross > 0.0)
-    return tris[keep], normals[keep], ids[keep]
-
-
-def _clean_normals(normals: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Unit shading normals; a zero or non-finite one becomes the face normal."""
-    length = np.linalg.norm(normals, axis=2, keepdims=True)
-    good = np.isfinite(length) & (length > 1e-20)
-    unit = np.divide(normals, np.where(good, length, 1.0))
-    face = np.repeat(shapes.face_normals(tris)[:, None, :], 3, axis=1)
-    return np.where(good, unit, face)

@@ -19,11 +19,11 @@ scene.glb           triangles of every renderable mesh object. Materials: the ex
                     metallic, roughness, emission colour in [0, 1] with the scale in
                     KHR_materials_emissive_strength, transmission, IOR; textures dropped:
                     both renders use an image's mean colour)
-[[materials]],      blackbody emitters (removed from the glb, written as PLY meshes) and
-[[objects]]         area lights (exact quads: [[lights]] area would lose the rotation
-                    about the light's axis)
-[[lights]]          point, spot, sun (the glTF light units would round-trip through
-                    photometric conversions)
+[[materials]],      blackbody emitters (removed from the glb, written as PLY meshes)
+[[objects]]
+[[lights]]          point, spot, sun and area lights (the glTF light units would round-trip
+                    through photometric conversions; an area light's ``up`` keeps its
+                    rotation about its axis)
 [scene]             ``file = "scene.glb"``, the world's constant background
 [camera]            position, rotation (3×3 rows), vertical fov, shift
 [motion]            mode; ct', ct' per frame; one keyframe per frame (β in world axes,
@@ -344,13 +344,17 @@ def _light_table(light) -> dict[str, Any]:
                          "color": [float(x) for x in light.color], "power": light.power}
     if light.type != "sun":
         t["position"] = [float(x) for x in light.position]
-    if light.type in ("spot", "sun"):
+    if light.type in ("spot", "sun", "area"):
         t["direction"] = [float(x) for x in light.direction]
     if light.type in ("point", "spot"):
         t["radius"] = light.radius
     if light.type == "spot":
         t["spot_size"] = math.degrees(light.spot_size)
         t["spot_blend"] = light.spot_blend
+    if light.type == "area":
+        t["size"] = [float(x) for x in light.size]
+        if light.up is not None:
+            t["up"] = [float(x) for x in light.up]
     return t
 
 
@@ -388,8 +392,7 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
             export_lights=False, export_cameras=False, export_animations=False,
             export_image_format="NONE", export_yup=True, export_extras=False)
     specs = {m.name: m for m in exported.scene.materials}
-    special = {m.name for m in exported.scene.materials
-               if m.emission_blackbody is not None and not m.name.startswith("area_light:")}
+    special = {m.name for m in exported.scene.materials if m.emission_blackbody is not None}
     doc, binary = read_glb(glb)
     patch_materials(doc, specs, special)
     write_glb(glb, doc, binary)
@@ -404,10 +407,6 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
         materials.append(_material_table(specs[name]))
         objects.append({"name": name, "shape": "mesh", "file": f"meshes/{ply.name}",
                         "material": name, "up": "z"})
-    for area in exported.area_lights:
-        materials.append(_material_table(area.material))
-        objects.append({"name": area.material.name, "shape": "quad",
-                        "corners": area.corners.tolist(), "material": area.material.name})
 
     rs = scene.relray
     cam_settings = exported.camera
@@ -427,7 +426,7 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
         job["materials"] = materials
     if objects:
         job["objects"] = objects
-    lights = [_light_table(light) for light in exported.scene.lights]
+    lights = [_light_table(light) for light in exported.lights]
     if lights:
         job["lights"] = lights
     job_path = out / job_name

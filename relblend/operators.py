@@ -1,13 +1,29 @@
-"""The add-on's actions: velocity keyframes, motion presets, export for farm.
+"""The add-on's actions: velocity keyframes, motion presets, export for farm, render on farm.
 
 (No ``from __future__ import annotations`` here: Blender reads the operators'
 property annotations as objects.)
 """
 
+import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import bpy
 from bpy.props import BoolProperty, IntProperty, StringProperty
+
+if TYPE_CHECKING:
+    from .farm import FarmExport
+    from .farm_run import FarmRun
+
+
+def _export_errors() -> tuple[type[Exception], ...]:
+    """The errors of an export that are the user's to fix (reported, not raised)."""
+    from ..core.errors import UserError
+    from .export import ExportError
+    from .farm import FarmExportError
+    from .motion import MotionError
+
+    return (FarmExportError, ExportError, MotionError, UserError)
 
 
 def _camera_data(context):
@@ -123,10 +139,7 @@ class RELRAY_OT_export_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
         return {"RUNNING_MODAL"}
 
     def execute(self, context):
-        from ..core.errors import UserError
-        from .export import ExportError
-        from .farm import FarmExportError, export_farm
-        from .motion import MotionError
+        from .farm import export_farm
 
         if not self.directory:
             self.report({"ERROR"}, "no export directory given")
@@ -134,7 +147,7 @@ class RELRAY_OT_export_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
         frames = None if self.use_frame_range else (self.frame_start, self.frame_end)
         try:
             result = export_farm(context, bpy.path.abspath(self.directory), frames)
-        except (FarmExportError, ExportError, MotionError, UserError) as e:
+        except _export_errors() as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         for message in result.warnings:
@@ -145,11 +158,164 @@ class RELRAY_OT_export_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
         return {"FINISHED"}
 
 
+#: Seconds between two polls of a farm run (the modal timer).
+FARM_TIMER_SECONDS = 0.25
+#: The farm run in progress (at most one per Blender session).
+_FARM_RUNS: list["FarmRun"] = []
+
+
+def active_farm_run() -> "FarmRun | None":
+    """The farm run still in progress, or None."""
+    run = _FARM_RUNS[0] if _FARM_RUNS else None
+    return run if run is not None and not run.progress.finished else None
+
+
+def farm_directory(prefs) -> Path:
+    """The preferences' farm folder; by default relray_farm beside the .blend file (the
+    temp folder's for an unsaved file)."""
+    raw = (prefs.farm_directory.strip() if prefs is not None else "") or "//relray_farm"
+    if raw.startswith("//") and not bpy.data.filepath:
+        return Path(tempfile.gettempdir()) / (raw[2:].strip("/\\") or "relray_farm")
+    return Path(bpy.path.abspath(raw)).expanduser()
+
+
+def start_farm_render(context, directory: str | Path, scheduler: str = "",
+                      overwrite: bool = False, connect_timeout: float | None = None,
+                      env: dict[str, str] | None = None) -> tuple["FarmRun", "FarmExport"]:
+    """Export the scene's job into ``directory`` and launch ``relray render`` on it.
+
+    Returns (the :class:`.farm_run.FarmRun`, the :class:`.farm.FarmExport`). An export
+    whose files changed since the last one renders every frame again; an unchanged one
+    resumes (a cancelled run continues where it stopped).
+    """
+    from .farm import export_farm
+    from .farm_run import export_digest, start_render
+
+    before = export_digest(directory)
+    result = export_farm(context, directory)
+    overwrite = overwrite or export_digest(directory) != before
+    run = start_render(result.job_path, scheduler, overwrite, connect_timeout, env)
+    _FARM_RUNS[:] = [run]
+    return run, result
+
+
+def show_farm_status(context, text: str | None) -> None:
+    """The run's status line in the status bar and the editor's header (None: clear)."""
+    workspace = getattr(context, "workspace", None)
+    if workspace is not None:
+        workspace.status_text_set(text)
+    area = getattr(context, "area", None)
+    if area is not None:
+        area.header_text_set(text)
+    screen = getattr(context, "screen", None)
+    for other in screen.areas if screen is not None else ():
+        if other.type == "PROPERTIES":  # the Render tab's status line
+            other.tag_redraw()
+
+
+class RELRAY_OT_render_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Export the farm job and render it with `relray render` in a separate process"""
+
+    bl_idname = "relray.render_farm"
+    bl_label = "Render on Farm"
+    bl_description = ("Export the farm job and render it with `relray render` in a separate "
+                      "process: on this machine, or on the Dask scheduler set in the add-on's "
+                      "preferences. Esc cancels")
+    bl_options = {"REGISTER"}
+
+    overwrite: BoolProperty(
+        name="Overwrite", default=False,
+        description="Render every frame again (a rerun of an unchanged export resumes)")
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene.camera is not None and active_farm_run() is None
+
+    def _start(self, context):
+        """Export and launch; None (and an error report) when that fails."""
+        from .farm_run import FarmRunError
+        from .properties import addon_preferences
+
+        prefs = addon_preferences(context)
+        scheduler = prefs.scheduler.strip() if prefs is not None else ""
+        timeout = prefs.connect_timeout if prefs is not None else None
+        try:
+            run, result = start_farm_render(context, farm_directory(prefs), scheduler,
+                                            self.overwrite, timeout)
+        except (*_export_errors(), FarmRunError, OSError) as e:
+            self.report({"ERROR"}, str(e))
+            return None
+        for message in result.warnings:
+            self.report({"WARNING"}, message)
+        self.report({"INFO"}, f"relray farm: rendering {result.job_path} (frames "
+                              f"{result.frames[0]}-{result.frames[1]}) on "
+                              f"{scheduler or 'this machine'}")
+        return run
+
+    def _finish(self, run):
+        """Report how the run ended: frames done, failed frames, the user error, cancelled."""
+        level, message = run.progress.outcome()
+        self.report({level}, message)
+        return {"FINISHED"} if run.progress.state == "done" else {"CANCELLED"}
+
+    def execute(self, context):
+        """Scripts and background mode (no event loop): render and wait for the end."""
+        run = self._start(context)
+        if run is None:
+            return {"CANCELLED"}
+        run.wait()
+        return self._finish(run)
+
+    def invoke(self, context, event):
+        """Start the run and a modal timer that polls it (Blender's UI never waits)."""
+        if context.window is None:
+            return self.execute(context)
+        run = self._start(context)
+        if run is None:
+            return {"CANCELLED"}
+        self._run = run
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(FARM_TIMER_SECONDS, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0.0, 1.0)
+        show_farm_status(context, run.progress.status_text())
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        """TIMER: poll the run, show its progress; Esc: cancel it; other events pass."""
+        run = self._run
+        escape = event.type == "ESC" and event.value == "PRESS"
+        if escape:
+            run.cancel()
+        elif event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        progress = run.poll()
+        context.window_manager.progress_update(progress.fraction)
+        show_farm_status(context, progress.status_text())
+        if progress.finished:
+            self._end(context)
+            return self._finish(run)
+        return {"RUNNING_MODAL"} if escape else {"PASS_THROUGH"}
+
+    def cancel(self, context):
+        """Blender ends the operator (a file is loaded, Blender quits): stop the child."""
+        self._run.cancel()
+        self._end(context)
+
+    def _end(self, context):
+        """Remove the timer, the progress and the status text."""
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        show_farm_status(context, None)
+
+
 classes = (
     RELRAY_OT_add_velocity_keyframe,
     RELRAY_OT_load_motion_preset,
     RELRAY_MT_motion_presets,
     RELRAY_OT_export_farm,
+    RELRAY_OT_render_farm,
 )
 
 

@@ -34,6 +34,10 @@ In worldline mode the camera object's own location is its lab position at ct' = 
 Render tab: samples, seed, max bounces, spectral model, Doppler and searchlight
 switches, threads. ``bpy.types.ViewLayer.relray`` (:class:`RelrayViewLayerSettings`):
 the Doppler and LabTime passes (Depth is Blender's own Z pass toggle).
+
+The add-on's preferences (:class:`RelrayPreferences`, ``bl_idname`` = the add-on's
+package): the Dask scheduler address of "Render on Farm" (empty: this machine), its
+connect timeout, and the folder the job is exported to.
 """
 
 import math
@@ -46,6 +50,7 @@ from bpy.props import (
     FloatVectorProperty,
     IntProperty,
     PointerProperty,
+    StringProperty,
 )
 
 #: Largest component / speed the UI accepts (|β| must stay below 1: c = 1).
@@ -188,7 +193,46 @@ class RelrayViewLayerSettings(bpy.types.PropertyGroup):
                                     description="Lab time of emission of the first hit")
 
 
-classes = (RelrayCameraSettings, RelraySceneSettings, RelrayViewLayerSettings)
+#: The add-on's package: ``bl_ext.<repository>.relray`` installed, ``relray`` in development.
+ADDON_PACKAGE = __package__.rpartition(".")[0] or __package__
+
+
+class RelrayPreferences(bpy.types.AddonPreferences):
+    """The add-on's preferences: where "Render on Farm" renders."""
+
+    bl_idname = ADDON_PACKAGE
+
+    scheduler: StringProperty(
+        name="Scheduler", default="",
+        description="Dask scheduler of Render on Farm, tcp://HOST:8786 (empty: render on "
+                    "this machine, in a separate process)")
+    connect_timeout: FloatProperty(
+        name="Connect Timeout", default=10.0, min=0.1, max=3600.0,
+        description="Seconds to reach the scheduler before giving up")
+    farm_directory: StringProperty(
+        name="Farm Directory", subtype="DIR_PATH", default="",
+        description="Where Render on Farm exports the job (frames go to its out/ folder); "
+                    "with a scheduler, a folder every worker sees at the same path. Empty: "
+                    "relray_farm beside the .blend file (in the temp folder if unsaved)")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(self, "scheduler")
+        row = layout.row()
+        row.enabled = bool(self.scheduler.strip())
+        row.prop(self, "connect_timeout")
+        layout.prop(self, "farm_directory")
+
+
+def addon_preferences(context):
+    """The add-on's preferences, or None when it is not enabled under ADDON_PACKAGE."""
+    addon = context.preferences.addons.get(ADDON_PACKAGE)
+    return None if addon is None else addon.preferences
+
+
+classes = (RelrayCameraSettings, RelraySceneSettings, RelrayViewLayerSettings,
+           RelrayPreferences)
 
 
 def register() -> None:

@@ -1,8 +1,9 @@
 """Panels of the Relativistic engine, and Blender's own panels it reuses.
 
 Our panels: Relativity (camera Object Data tab: motion, β, ct', switches, γ and the D
-range of the view, presets, velocity keyframes), Sampling, Relativity summary and
-Film (Render tab), Passes (View Layer tab), Light (light Object Data tab).
+range of the view, presets, velocity keyframes), Sampling, Relativity summary (with
+Export for Farm, Render on Farm and the farm run's status) and Film (Render tab),
+Passes (View Layer tab), Light (light Object Data tab).
 
 Blender's panels are reused as Cycles does: "RELRAY" is added to the
 ``COMPAT_ENGINES`` of every built-in panel open to any engine ("BLENDER_RENDER" in
@@ -163,7 +164,25 @@ class RELRAY_PT_relativity_summary(RelrayPanel, bpy.types.Panel):  # noqa: N801 
             box.label(text=f"{obj.name}: {s.mode.lower()}, γ {s.gamma:.4f}, ct' {s.ct:.4g}",
                       icon="CAMERA_DATA")
             box.label(text=view_readout(context, obj.data))
-        layout.operator("relray.export_farm", icon="EXPORT")
+        draw_farm(layout, context)
+
+
+def draw_farm(layout, context) -> None:
+    """Export for Farm, Render on Farm, and the farm run's status while it renders."""
+    from .operators import active_farm_run
+    from .properties import addon_preferences
+
+    row = layout.row(align=True)
+    row.operator("relray.export_farm", icon="EXPORT")
+    row.operator("relray.render_farm", icon="NETWORK_DRIVE")
+    run = active_farm_run()
+    if run is not None:
+        layout.label(text=run.progress.status_text(), icon="TIME")
+    else:
+        prefs = addon_preferences(context)
+        where = prefs.scheduler.strip() if prefs is not None else ""
+        layout.label(text=f"Farm: {where or 'this machine'} (add-on preferences)",
+                     icon="PREFERENCES")
 
 
 class RELRAY_PT_film(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming

@@ -190,6 +190,16 @@ def test_render_command_and_env_run_the_cli():
     assert farm.parse_event("relray: warning") is None
 
 
+def test_child_numba_cache_is_never_the_parents(monkeypatch):
+    """Inside Blender the child gets its own kernel cache (module names differ)."""
+    assert farm.child_numba_cache("/c") == os.path.join("/c", "relray-cli")
+    monkeypatch.setenv("XDG_CACHE_HOME", "/xdg")
+    monkeypatch.setenv("LOCALAPPDATA", "/xdg")
+    assert farm.child_numba_cache(None) == os.path.join("/xdg", "relray", "numba-cli")
+    env = farm.subprocess_env({"NUMBA_CACHE_DIR": "/c"})  # outside Blender: unchanged
+    assert env["NUMBA_CACHE_DIR"] == "/c"
+
+
 # ------------------------------------------------------------------------------ CLI, local default
 def test_json_progress_local_then_resume(tmp_path, reference, capsys):
     job = write_job(tmp_path, 6)

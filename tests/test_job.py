@@ -273,6 +273,12 @@ BAD_JOBS = [
      "lights[0].direction", "zero"),
     ("light power negative", '[[lights]]\ntype = "point"\npower = -5\n' + SCENE,
      "lights[0].power", ">= 0"),
+    ("area up parallel", '[[lights]]\ntype = "area"\ndirection = [0, 0, -2]\nup = [0, 0, 3]\n'
+     + SCENE, "lights[0].up", "parallel"),
+    ("area up zero", '[[lights]]\ntype = "area"\nup = [0, 0, 0]\n' + SCENE, "lights[0].up",
+     "zero"),
+    ("up on a spot light", '[[lights]]\ntype = "spot"\nup = [0, 1, 0]\n' + SCENE,
+     "lights[0].up", "area"),
     ("include missing", '[scene]\ninclude = "other.toml"\n', "scene.include", "not found"),
     ("include itself", '[scene]\ninclude = "job.toml"\n' + SCENE, "scene.include", "cycle"),
     ("background negative", "[scene]\nbackground = [0, -1, 0]\n" + SCENE, "scene.background",
@@ -537,3 +543,53 @@ def test_flyby_preset() -> None:
     assert j.output.dir == ROOT / "out" / "flyby"
     assert np.linalg.norm(job.beta_at_frame(j, 1)) == 0.0
     assert np.linalg.norm(job.beta_at_frame(j, 48)) == pytest.approx(0.7)
+
+
+# ----------------------------------------------------- validators for Python callers
+
+
+def test_material_and_light_from_dict_validate_as_a_job_does() -> None:
+    m = job.material_from_dict({"name": "red", "base_color": (0.6, 0.1, np.float32(0.05)),
+                                "ior": np.float64(1.45)}, "materials[3]", "scene.blend")
+    assert m == job.MaterialSpec(name="red", base_color=(0.6, 0.1, pytest.approx(0.05)),
+                                 ior=1.45)
+    with pytest.raises(UserError) as err:
+        job.material_from_dict({"name": "red", "roughness": 2.0}, "materials[3]", "a.blend")
+    assert str(err.value) == ("a.blend: key 'materials[3].roughness': must be <= 1 (got 2)")
+    with pytest.raises(UserError, match="key 'iorr': unknown key.*did you mean 'ior'"):
+        job.material_from_dict({"name": "x", "ior": 1.5, "iorr": 1.2})
+    light = job.light_from_dict({"type": "spot", "spot_size": 60.0, "direction": (0, 0, -2),
+                                 "name": "key"}, "lights[0]")
+    assert light.spot_size == pytest.approx(math.radians(60.0))  # degrees, as in a job
+    np.testing.assert_allclose(light.direction, (0, 0, -1))
+    with pytest.raises(UserError, match="key 'lights\\[0\\].radius': does not apply"):
+        job.light_from_dict({"type": "sun", "radius": 1.0}, "lights[0]")
+    with pytest.raises(UserError, match="must be a table"):
+        job.light_from_dict([1, 2], "lights[0]")
+
+
+def test_from_dict_clamps_closed_ranges_on_request() -> None:
+    notes: list[str] = []
+    m = job.material_from_dict({"name": "hdr", "base_color": [1.25, 0.5, -0.1], "ior": 0.8,
+                                "emission_strength": 3.0}, "", clamped=notes)
+    assert m.base_color == (1.0, 0.5, 0.0) and m.ior == 1.0 and m.emission_strength == 3.0
+    assert notes == ["base_color = 1.25 clamped to 1", "base_color = -0.1 clamped to 0",
+                     "ior = 0.8 clamped to 1"]
+    notes.clear()
+    light = job.light_from_dict({"type": "spot", "power": -2.0, "spot_blend": 1.5}, "",
+                                clamped=notes)
+    assert (light.power, light.spot_blend) == (0.0, 1.0) and len(notes) == 2
+    with pytest.raises(UserError, match="> 0"):  # an open bound cannot be clamped to
+        job.material_from_dict({"name": "b", "emission_blackbody": 0.0}, clamped=notes)
+    with pytest.raises(UserError, match="<= 1"):  # without the list: strict, as a job
+        job.material_from_dict({"name": "hdr", "base_color": [1.25, 0.5, 0.1]})
+
+
+def test_area_light_up_is_stored_perpendicular_and_unit(tmp_path: Path) -> None:
+    j = load(tmp_path, '[[lights]]\ntype = "area"\ndirection = [0, 0, -1]\n'
+                      'up = [1, 1, 0.5]\n' + SCENE)
+    (light,) = j.scene.lights
+    np.testing.assert_allclose(light.up, np.array([1, 1, 0]) / math.sqrt(2), atol=1e-15)
+    assert not light.up.flags.writeable
+    assert job.light_from_dict({"type": "area"}).up is None  # the shortest-arc default
+

@@ -269,3 +269,54 @@ def test_cornell_preset_scene() -> None:
     light = [m.name for m in s.materials].index("light")
     assert np.count_nonzero(s.material_ids == light) == 2
     assert s.dropped_degenerate == 0 and s.camera is None
+
+
+def test_area_light_up_turns_the_quad_about_its_direction(tmp_path: Path) -> None:
+    """``up`` is the light's local +Y: the height (0.4) then runs along x, the width along y."""
+    s = build(tmp_path, AREA.replace("size = [0.5, 0.4]", "size = [0.5, 0.4]\nup = [1, 0, 0]"))
+    quad = s.triangles[s.material_ids == 1].reshape(-1, 3)
+    np.testing.assert_allclose(quad.max(0) - quad.min(0), [0.4, 0.5, 0.0], atol=1e-6)
+    np.testing.assert_allclose(shapes.face_normals(s.triangles[s.material_ids == 1]),
+                               [[0, 0, -1]] * 2, atol=1e-7)
+    frame = shapes.frame_towards(np.array([0.3, -0.5, 0.8]), np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(frame.T @ frame, np.eye(3), atol=1e-12)
+    assert np.linalg.det(frame) == pytest.approx(1.0)
+    assert frame[2, 0] == pytest.approx(0.0, abs=1e-12)  # local +x is horizontal
+
+
+# ------------------------------------------------------------- scene_from_parts
+
+
+def test_scene_from_parts_does_what_build_scene_does(caplog) -> None:
+    tris = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                     [[0, 0, 0], [1, 0, 0], [2, 0, 0]],  # degenerate
+                     [[0, 0, 1], [1, 0, 1], [np.nan, 1, 1]],  # non-finite
+                     [[0, 0, 2], [0, 1, 2], [1, 0, 2]]], dtype=np.float32)
+    normals = np.zeros((4, 3, 3))
+    normals[0] = [0, 0, 2.0]  # scaled: made unit
+    # normals[3] is zero: replaced by the face normal (0, 0, -1)
+    mats = [job.MaterialSpec(name="a"), job.MaterialSpec(name="b")]
+    lights = [job.LightSpec(type="point", name="p"),
+              job.LightSpec(type="area", name="panel", position=np.array([0, 0, 3.0]),
+                            size=(0.5, 0.4), power=10.0, up=np.array([1.0, 0, 0]))]
+    with caplog.at_level(logging.WARNING, logger="relray"):
+        s = scene.scene_from_parts(tris, normals, np.array([0, 1, 1, 1]), mats, lights,
+                                   (0.1, 0.2, 0.3))
+    assert "dropped 2 degenerate" in caplog.text and s.dropped_degenerate == 2
+    assert s.triangles.dtype == np.float64 and len(s.triangles) == 4  # 2 kept + the quad
+    assert [m.name for m in s.materials] == ["a", "b", "area_light:panel"]
+    assert s.material_ids.tolist() == [0, 1, 2, 2]
+    assert [light.name for light in s.lights] == ["p"]
+    np.testing.assert_allclose(s.normals[0], [[0, 0, 1]] * 3)
+    np.testing.assert_allclose(s.normals[1], [[0, 0, -1]] * 3)
+    quad = s.triangles[2:].reshape(-1, 3)
+    np.testing.assert_allclose(quad.max(0) - quad.min(0), [0.4, 0.5, 0.0], atol=1e-12)
+    assert s.materials[2].emission_strength == pytest.approx(10.0 / (math.pi * 0.2))
+    assert s.background.tolist() == [0.1, 0.2, 0.3] and s.camera is None
+    one_id = scene.scene_from_parts(tris[:1], None, 0, mats, [], (0, 0, 0))
+    assert one_id.normals is None and one_id.material_ids.tolist() == [0]
+    with pytest.raises(UserError, match="x.blend: key 'scene': the scene has no triangles "
+                                        r"\(all 1 were degenerate\)"):
+        scene.scene_from_parts(tris[1:2], None, 0, mats, [], (0, 0, 0), file="x.blend")
+    with pytest.raises(ValueError, match="do not index 2 materials"):
+        scene.scene_from_parts(tris, None, 2, mats, [], (0, 0, 0))

@@ -32,7 +32,7 @@ def test_meshes_modifiers_and_instances(cornell):
     assert n_block > 12  # the Bevel modifier is applied
     # 5 walls (2 each), two instances of the block, the area light's quad.
     assert len(ex.scene.triangles) == 10 + 2 * n_block + 2
-    assert ex.scene.triangles.dtype == np.float32 and ex.scene.normals.shape[1:] == (3, 3)
+    assert ex.scene.triangles.dtype == np.float64 and ex.scene.normals.shape[1:] == (3, 3)
     white = [i for i, m in enumerate(ex.scene.materials) if m.name == "white"][0]
     tris = ex.scene.triangles[ex.scene.material_ids == white].reshape(-1, 3)
     # The tall instance reaches 1.2 m (scale 0.6, 0.6, 1.2 of a 1 m block), the short 0.6.
@@ -183,17 +183,72 @@ def test_lights_in_blender_units(ext):
     assert sun.type == "sun" and sun.power == pytest.approx(3.0)
     np.testing.assert_allclose(sun.direction, (0, math.sin(math.radians(30)),
                                                -math.cos(math.radians(30))), atol=1e-6)
-    # The area light: an exact quad, turned 30° about z, radiance P / (π A), one-sided.
-    (area,) = ex.area_lights
-    c = area.corners
+    # The area light: a [[lights]] area light turned 30° about z (its up), which the core
+    # makes an exact one-sided quad of radiance P / (π A).
+    area = next(light for light in ex.lights if light.type == "area")
+    assert "area" not in lights and area.size == pytest.approx((1.0, 0.5))
+    np.testing.assert_allclose(area.up, (-math.sin(math.radians(30)),
+                                         math.cos(math.radians(30)), 0.0), atol=1e-7)
+    i = next(i for i, m in enumerate(ex.scene.materials) if m.name == "area_light:area")
+    material, quad = ex.scene.materials[i], ex.scene.triangles[ex.scene.material_ids == i]
+    c = quad.reshape(-1, 3)
     np.testing.assert_allclose(c[:, 2], 4.0)
-    edge = c[3] - c[0]  # the width (local x)
+    edge = quad[0, 2] - quad[0, 1]  # the width (local x): corners c1 -> c2
     assert np.linalg.norm(edge) == pytest.approx(1.0)
     assert math.degrees(math.atan2(edge[1], edge[0])) == pytest.approx(30.0, abs=1e-4)
-    assert area.material.one_sided_emission
-    assert area.material.emission_strength == pytest.approx(2.0 / (math.pi * 0.5))
-    n = np.cross(c[1] - c[0], c[2] - c[0])
+    assert material.one_sided_emission
+    assert material.emission_strength == pytest.approx(2.0 / (math.pi * 0.5))
+    n = np.cross(quad[0, 1] - quad[0, 0], quad[0, 2] - quad[0, 0])
     assert n[2] < 0  # emits downwards, along the light's -z
+
+
+@pytest.mark.parametrize("scale", [(2.0, 3.0, 1.0), (-1.0, 0.5, 2.0)])
+def test_area_light_quad_follows_the_object_transform(ext, scale):
+    """Scaled, turned and mirrored: the quad's corners are the light's corners under the
+    object's matrix, and it still emits along the object's -Z."""
+    scene = scenes.reset_scene()
+    light = bpy.data.lights.new("panel", "AREA")
+    light.shape, light.size, light.size_y, light.energy = "RECTANGLE", 0.4, 0.2, 5.0
+    obj = bpy.data.objects.new("panel", light)
+    obj.location, obj.scale = (0.5, -1.0, 3.0), scale
+    obj.rotation_euler = (math.radians(20), math.radians(-35), math.radians(60))
+    scene.collection.objects.link(obj)
+    scene.camera = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    scene.collection.objects.link(scene.camera)
+    bpy.context.view_layer.update()
+    ex = _export(width=8, height=8)
+    m = np.array(obj.matrix_world)
+    local = np.array([[x, y, 0.0, 1.0] for x in (-0.2, 0.2) for y in (-0.1, 0.1)])
+    expected = np.unique(np.round((local @ m.T)[:, :3], 6), axis=0)  # rows, sorted
+    (i,) = [i for i, mat in enumerate(ex.scene.materials) if mat.name == "area_light:panel"]
+    quad = ex.scene.triangles[ex.scene.material_ids == i]
+    corners = np.unique(np.round(quad.reshape(-1, 3), 6), axis=0)
+    np.testing.assert_allclose(corners, expected, atol=2e-6)
+    n = np.cross(quad[0, 1] - quad[0, 0], quad[0, 2] - quad[0, 0])
+    assert n @ (-m[:3, 2]) > 0  # emits along the object's -Z
+
+
+def test_values_beyond_a_jobs_ranges_are_clamped_by_the_core_with_a_warning(ext):
+    """Blender's sockets allow a base colour above 1, an IOR below 1, a negative power:
+    the core's validators (the job format's own) clamp them, each with a warning."""
+    scene = scenes.reset_scene()
+    mat = scenes.principled("hot", (1.5, 0.5, 0.2))
+    mat.node_tree.nodes["Principled BSDF"].inputs["IOR"].default_value = 0.5
+    scenes.quad_object("floor", [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], mat)
+    light = bpy.data.lights.new("dark", "POINT")
+    light.energy = -5.0
+    scene.collection.objects.link(bpy.data.objects.new("dark", light))
+    scene.camera = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    scene.collection.objects.link(scene.camera)
+    ex = _export(width=8, height=8)
+    spec = _material(ex, "hot")
+    assert spec.base_color == (1.0, 0.5, pytest.approx(0.2)) and spec.ior == 1.0
+    (point,) = ex.scene.lights
+    assert point.power == 0.0
+    assert ex.warnings.messages == [
+        "material 'hot': base_color = 1.5 clamped to 1 (outside the range relray renders)",
+        "material 'hot': ior = 0.5 clamped to 1 (outside the range relray renders)",
+        "light 'dark': power = -5 clamped to 0 (outside the range relray renders)"]
 
 
 def test_world_background(ext):

@@ -79,7 +79,9 @@ def test_farm_job_reproduces_the_blender_render(farm_scene, engine, tmp_path):
     assert doc["render"]["seed"] == 7 and doc["render"]["spp"] == 16
     assert (out / "meshes" / "hot.ply").is_file()  # the blackbody ball, beside the glb
     assert any(m.get("emission_blackbody") == pytest.approx(3000.0) for m in doc["materials"])
-    assert [light["type"] for light in doc["lights"]] == ["point"]
+    assert [light["type"] for light in doc["lights"]] == ["area", "point"]
+    area = doc["lights"][0]  # the ceiling light, with its rotation about its axis
+    assert area["size"] == pytest.approx([0.5, 0.4]) and area["up"] == pytest.approx([0, 1, 0])
     farm = ext_module("relblend.farm")
     gl, _ = farm.read_glb(out / "scene.glb")
     red = next(m for m in gl["materials"] if m["name"] == "red")
