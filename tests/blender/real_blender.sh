@@ -27,7 +27,7 @@ SUITE=trixie
 APT_PACKAGES="blender python3-numpy python3-pytest python3-scipy python3-pil python3-typing-extensions"
 # The core's compiled dependencies as cp313 manylinux wheels from PyPI, the same versions
 # as in .venv (numba <2.6 and embreex accept numpy 2.2); pure-Python ones without deps.
-PIP_PACKAGES="numba llvmlite embreex colour-science imageio trimesh"
+PIP_PACKAGES="numba llvmlite embreex colour-science imageio trimesh OpenImageIO"
 CHROOT_RECIPE="v1 $SUITE $APT_PACKAGES"
 
 say() { echo "test-blender: $*"; }
