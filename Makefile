@@ -53,7 +53,7 @@ stress: $(STAMP)
 gallery: $(STAMP)
 	$(BIN)/python docs/gallery.py
 
-## make bench: the benchmark suite (about an hour on 2 cores): bench/results/*.csv and
+## make bench: the benchmark suite (10 min idle, up to an hour busy): bench/results/*.csv,
 ## plots, bench/RESULTS.md; installs bpy 5.0.1 (Cycles, the anchor) if it is missing
 bench: $(STAMP)
 	$(BIN)/python -c "import bpy" 2>/dev/null || \
@@ -61,7 +61,7 @@ bench: $(STAMP)
 	$(BIN)/python -m relray.bench.run
 
 ## make bench-quick: the same at small sizes in under 3 minutes (bench/results/quick/);
-## the Cycles series only if bpy is already installed
+## Cycles comes from the dev extra's bpy (without bpy its series are left out)
 bench-quick: $(STAMP)
 	$(BIN)/python -m relray.bench.run --quick
 

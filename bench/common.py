@@ -338,13 +338,14 @@ def mean_luminance(rgb: np.ndarray) -> float:
 
 
 def time_at_error(times: Sequence[float], errors: Sequence[float],
-                  level: float) -> tuple[float, bool]:
+                  level: float, extrapolate: bool = True) -> tuple[float, bool]:
     """Time at which an error-vs-time curve reaches ``level`` (log-log interpolation).
 
     The points are sorted by time.  Inside the range of the curve the crossing is
     interpolated linearly in (log t, log e); outside it the power law through the two
     nearest points is extrapolated and the second value (``extrapolated``) is True
-    (NaN when fewer than two positive points exist or the curve does not fall).
+    (NaN when fewer than two positive points exist, the curve does not fall, or
+    ``extrapolate`` is False).
     """
     t = np.asarray(times, np.float64)
     e = np.asarray(errors, np.float64)
@@ -360,6 +361,8 @@ def time_at_error(times: Sequence[float], errors: Sequence[float],
         if lo <= y <= hi and e[i] != e[i + 1]:
             f = (y - e[i]) / (e[i + 1] - e[i])
             return math.exp(t[i] + f * (t[i + 1] - t[i])), False
+    if not extrapolate:
+        return math.nan, True
     i = 0 if y > e.max() else len(t) - 2
     slope = (e[i + 1] - e[i]) / (t[i + 1] - t[i])
     if slope >= 0.0:

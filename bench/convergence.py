@@ -146,13 +146,60 @@ def run(cfg: ConvergenceConfig, tmp: Path, use_cycles: bool = True,
                 r = bench.render(spp=cap, width=cfg.width, height=cfg.height,
                                  threads=cfg.threads, seed=seed, noise_threshold=t)
                 record("relray adaptive", t, seed, r.rgb, r.wall, r.cpu, r.spp_mean)
+        diagnosis = adaptive_diagnosis(bench, cfg, refs["relray_full"])
     finally:
         if cy is not None:
             cy.close()
-    return {"raw": raw, "medians": medians(raw), "converged": compare_converged(refs),
+    return {"raw": raw, "diagnosis": diagnosis, "medians": medians(raw),
+            "converged": compare_converged(refs),
             "refs": {k: v for k, v in refs.items() if k != "seconds"},
             "ref_seconds": refs["seconds"], "config": asdict(cfg),
             "cycles_version": cy.version if cy is not None else None}
+
+
+def adaptive_diagnosis(bench: cm.RelrayBench, cfg: ConvergenceConfig,
+                       ref: np.ndarray) -> list[dict[str, Any]]:
+    """Why adaptive sampling does (not) pay: per threshold, which pixels stopped early,
+    how biased and how noisy they are, against a plain render of the same mean spp.
+
+    Relative luminance errors (x - r) / max(r, 1e-3) per pixel; "stopped" pixels are those
+    with fewer samples than the cap.  A stopping rule that judges a pixel by the same
+    samples it averages stops the pixels whose first samples happened to agree (missed
+    the rare bright paths): they come out too dark (negative bias) and noisier than the
+    plain render in the same pixels.
+    """
+    cap = max(cfg.spp)
+    rows = []
+    for t in cfg.thresholds:
+        a = bench.render(spp=cap, width=cfg.width, height=cfg.height, threads=cfg.threads,
+                         seed=0, noise_threshold=t)
+        n = max(1, int(round(a.spp_mean)))
+        p = bench.render(spp=n, width=cfg.width, height=cfg.height, threads=cfg.threads,
+                         seed=0)
+        spp = a.film.samples_per_pixel.ravel()
+        yr = (ref @ cm.LUMA).ravel()
+
+        def rel(img, yr=yr):
+            return ((img @ cm.LUMA).ravel() - yr) / np.maximum(yr, 1e-3)
+
+        ra, rp = rel(a.rgb), rel(p.rgb)
+        st = spp < cap
+        early = spp <= 16
+
+        def rms(x, m):
+            return float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else float("nan")
+
+        rows.append({
+            "threshold": t, "cap": cap, "mean_spp": a.spp_mean, "plain_spp": n,
+            "cpu_adaptive_s": a.cpu, "cpu_plain_s": p.cpu,
+            "cpu_per_sample_ratio": (a.cpu / a.spp_mean) / (p.cpu / n),
+            "rel_mse_adaptive": cm.rel_mse(a.rgb, ref), "rel_mse_plain": cm.rel_mse(p.rgb, ref),
+            "stopped_fraction": float(st.mean()), "stopped_by_16spp": float(early.mean()),
+            "bias_stopped": float(ra[st].mean()) if st.any() else float("nan"),
+            "bias_stopped_plain": float(rp[st].mean()) if st.any() else float("nan"),
+            "rms_stopped": rms(ra, st), "rms_stopped_plain": rms(rp, st),
+            "rms_capped": rms(ra, ~st), "rms_capped_plain": rms(rp, ~st)})
+    return rows
 
 
 def medians(raw: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -177,17 +224,28 @@ def curve(med: list[dict[str, Any]], series: str, time_key: str,
 
 
 def error_levels(med: list[dict[str, Any]], err_key: str, spp: list[int]) -> list[float]:
-    """Two error levels: what Cycles (else relray) reaches at the 2nd and 2nd-to-last spp."""
-    series = "cycles" if any(r["series"] == "cycles" for r in med) else "relray"
-    by_x = {r["x"]: r[err_key] for r in med if r["series"] == series}
-    picks = [spp[1], spp[-2]] if len(spp) >= 3 else [spp[0], spp[-1]]
-    return [by_x[p] for p in picks]
+    """Two error levels that both plain curves reach (so no ratio is extrapolated).
+
+    The high level is what Cycles (else relray) reaches at the 2nd spp of the ladder; the
+    low level is the larger of the two curves' lowest errors, i.e. the lowest error
+    that both renderers reached within the ladder.
+    """
+    have = {r["series"] for r in med}
+    anchor = "cycles" if "cycles" in have else "relray"
+    by_x = {r["x"]: r[err_key] for r in med if r["series"] == anchor}
+    high = by_x[spp[1]] if len(spp) > 1 else by_x[spp[0]]
+    low = max(min(r[err_key] for r in med if r["series"] == s)
+              for s in ("relray", anchor))
+    return [high, low] if low < high else [high]
 
 
 def equal_error(med: list[dict[str, Any]], spp: list[int]) -> list[dict[str, Any]]:
-    """Time ratios relray / Cycles at equal error, for both metrics and both clocks.
+    """Time ratios A / B at equal error, for both metrics and both clocks.
 
-    Pairs: relray vs cycles; relray vs cycles adaptive; relray adaptive vs cycles adaptive.
+    Pairs: relray vs cycles; relray vs cycles adaptive; relray adaptive vs cycles
+    adaptive; relray adaptive vs relray.  Plain curves may be extrapolated by their end
+    points' power law (flagged); adaptive curves flatten at their spp cap, so a level
+    outside them is reported as not reached (NaN).
     """
     rows = []
     have = {r["series"] for r in med}
@@ -198,8 +256,10 @@ def equal_error(med: list[dict[str, Any]], spp: list[int]) -> list[dict[str, Any
         for lvl_i, level in enumerate(error_levels(med, err_key, spp)):
             for time_key in ("wall_s", "cpu_s"):
                 for a, b in pairs:
-                    ta, xa = cm.time_at_error(*curve(med, a, time_key, err_key), level)
-                    tb, xb = cm.time_at_error(*curve(med, b, time_key, err_key), level)
+                    ta, xa = cm.time_at_error(*curve(med, a, time_key, err_key), level,
+                                              extrapolate="adaptive" not in a)
+                    tb, xb = cm.time_at_error(*curve(med, b, time_key, err_key), level,
+                                              extrapolate="adaptive" not in b)
                     rows.append({"metric": err_key, "level_index": lvl_i, "level": level,
                                  "clock": time_key, "a": a, "b": b, "time_a_s": ta,
                                  "time_b_s": tb, "ratio_a_over_b": ta / tb,

@@ -167,6 +167,7 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         cm.write_csv(out / "convergence_raw.csv", res["raw"])
         cm.write_csv(out / "convergence_medians.csv", res["medians"])
         cm.write_csv(out / "converged_compare.csv", res["converged"])
+        cm.write_csv(out / "adaptive_diagnosis.csv", res["diagnosis"])
         cm.write_csv(out / "equal_error.csv", convergence.equal_error(res["medians"], cfg.spp))
         report.plot_converged(res["refs"], out / "converged.png")
         gain = convergence.adaptive_gain(res["medians"], "cpu_s")

@@ -101,7 +101,7 @@ def camera_settings(job: Job):
     return cam
 
 
-ADAPTIVE_FIRST_PASS = 8
+ADAPTIVE_FIRST_PASS = 32  # fewer samples bias the stopping rule dark (bench/RESULTS.md §4)
 
 
 def sample_passes(s_lo: int, s_hi: int, adaptive: bool) -> list[tuple[int, int]]:

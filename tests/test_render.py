@@ -25,8 +25,8 @@ def _renderer(noise_threshold: float, spp: int):
 
 def test_sample_passes():
     assert render.sample_passes(0, 64, False) == [(0, 64)]
-    assert render.sample_passes(0, 64, True) == [(0, 8), (8, 16), (16, 32), (32, 64)]
-    assert render.sample_passes(0, 5, True) == [(0, 5)]
+    assert render.sample_passes(0, 128, True) == [(0, 32), (32, 64), (64, 128)]
+    assert render.sample_passes(0, 20, True) == [(0, 20)]
     assert render.sample_passes(0, 40, True)[-1] == (32, 40)
 
 
