@@ -46,6 +46,8 @@ from .sampling import (
 )
 
 RR_DEPTH = 3
+# fastmath without nnan/ninf: NaN and infinity checks keep their meaning
+FAST_MATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 DIMS_CAMERA = 3      # jitter x, jitter y, wavelength offset
 DIMS_PER_BOUNCE = 8  # light pick, light u1, u2, lobe pick, bsdf u1, u2, roulette, spare
 
@@ -123,7 +125,7 @@ def lookup(table, row, u):
     return table[row, i] * (1.0 - f) + table[row, i + 1] * f
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
 def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, lamu,
           prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d, sh_t, sh_c, sky_seen):
     """One bounce for the live rays 0 ≤ i < n (ray i belongs to path ``idx[i]``).
