@@ -40,6 +40,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from stress_config import STRESS, pick
+from test_cli import TINY
 from test_job import BAD_JOBS, SCENE
 from test_stress_render import assert_finite, render_case
 
@@ -632,30 +633,7 @@ def test_cli_subprocess_malformed_job(tmp_path, name):
     assert files_under(tmp_path) == before
 
 
-TWO_FRAMES = """
-[render]
-width = 12
-height = 8
-spp = 2
-max_depth = 2
-[output]
-dir = "out"
-name = "f_{frame:03d}"
-[motion]
-frames = [1, 2]
-ct_per_frame = 0.5
-beta = [0.3, 0.0, 0.0]
-[[materials]]
-name = "lamp"
-emission = [1.0, 1.0, 1.0]
-emission_strength = 2.0
-[[objects]]
-shape = "sphere"
-center = [0.0, 0.0, 1.0]
-radius = 0.6
-subdivisions = 2
-material = "lamp"
-"""
+TWO_FRAMES = TINY  # a tiny two-frame job (tests/test_cli.py)
 
 
 def test_finished_frames_survive_every_bad_rerun(tmp_path):
@@ -678,8 +656,8 @@ def test_finished_frames_survive_every_bad_rerun(tmp_path):
         (["--overwrite"], TWO_FRAMES.replace("[[objects]]", '[[objects]]\nshape = "mesh"\n'
                                              'file = "t.glb"\nmaterial = "lamp"\n[[objects]]'),
          "objects[0].file"),
-        (["--overwrite"], TWO_FRAMES.replace("width = 12", "width = 32768")
-         .replace("height = 8", "height = 8192"), "render.height"),
+        (["--overwrite"], TWO_FRAMES.replace("width = 24", "width = 32768")
+         .replace("height = 16", "height = 8192"), "render.height"),
     ]
     (tmp_path / "t.glb").write_bytes(b"glTF\x02\x00\x00\x00\xff\x00\x00\x00")
     # default: one override error, one parse error, one render-time error; stress: all
