@@ -407,7 +407,8 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_loc
           sky_seen: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Trace a wavefront of camera rays; returns (L (N,4) lab radiance, primary hit t).
 
-    ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit.
+    ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit;
+    both are used as the wavefront's ray buffers and are overwritten.
     """
     n = len(keys)
     L = np.zeros((n, 4), np.float32)
@@ -415,8 +416,10 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_loc
     prev_pdf = np.zeros(n, np.float32)
     prev_delta = np.ones(n, np.int32)
     idx = np.arange(n, dtype=np.int64)
-    o = np.array(o_local, np.float32, order="C")      # compacted in place by shade
-    d = np.array(d, np.float32, order="C")
+    # shade compacts the rays in place: float32 C-contiguous inputs are used (and
+    # overwritten) as they are, anything else is converted once
+    o = np.ascontiguousarray(o_local, np.float32)
+    d = np.ascontiguousarray(d, np.float32)
     sh_idx = np.empty(n, np.int64)
     sh_o = np.empty((n, 3), np.float32)
     sh_d = np.empty((n, 3), np.float32)
