@@ -26,7 +26,7 @@ from numba import njit
 from . import relativity
 from .job import CameraSettings
 from .relativity import aberrate_doppler_ray
-from .sampling import rand
+from .sampling import sobol2
 
 
 @dataclass(frozen=True)
@@ -112,8 +112,9 @@ def _primary_rays(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, h
     c = x0[0] * x0[0] + x0[1] * x0[1] + x0[2] * x0[2] - r2
     for i in range(len(keys)):
         p = pixels[i]
-        col = (p % width) + rand(keys[i], 0)
-        row = (p // width) + rand(keys[i], 1)
+        jx, jy = sobol2(keys[i], 0)
+        col = (p % width) + jx
+        row = (p // width) + jy
         dx, dy, dz = view_direction(rot, tan_half, aspect, scale, sx, sy, width, height,
                                     col, row)
         f = 1.0

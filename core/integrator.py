@@ -40,6 +40,7 @@ from .sampling import (
     onb,
     power_heuristic,
     rand,
+    sobol2,
     to_world,
     uniform_sphere,
     uniform_triangle,
@@ -49,7 +50,8 @@ RR_DEPTH = 3
 # fastmath without nnan/ninf: NaN and infinity checks keep their meaning
 FAST_MATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 DIMS_CAMERA = 3      # jitter x, jitter y, wavelength offset
-DIMS_PER_BOUNCE = 8  # light pick, light u1, u2, lobe pick, bsdf u1, u2, roulette, spare
+DIMS_PER_BOUNCE = 8  # light pair, -, -, lobe pick, bsdf pair, -, roulette, spare
+ONE_MINUS = 1.0 - 2.0**-53
 
 
 class KernelScene(NamedTuple):
@@ -209,9 +211,11 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
         # next-event estimation
         nl = len(sc.l_kind)
         if smooth_w > 0.0 and nl > 0:
-            k, p_sel = select(sc.l_cdf, rand(key, base))
-            u1 = rand(key, base + 1)
-            u2 = rand(key, base + 2)
+            # one stratified pair picks the light (u_a) and the point on it: u_a is
+            # reused, rescaled to [0, 1) inside the picked light's cdf interval
+            u_a, u2 = sobol2(key, base)
+            k, p_sel = select(sc.l_cdf, u_a)
+            u1 = min((u_a - sc.l_cdf[k]) / p_sel, ONE_MINUS) if p_sel > 0.0 else 0.0
             kind = sc.l_kind[k]
             delta = True
             scale = sc.l_scale[k]
@@ -288,8 +292,7 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
                     n_sh += 1
         # continue the path: pick a lobe
         ul = rand(key, base + 3)
-        u1 = rand(key, base + 4)
-        u2 = rand(key, base + 5)
+        u1, u2 = sobol2(key, base + 4)
         off = 1.0
         if ul < wg:
             # smooth dielectric: entering when the ray meets the geometric front face

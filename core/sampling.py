@@ -1,8 +1,24 @@
 """Random numbers and warps for the path tracer (numba device functions).
 
-Counter-based RNG: every random number is a hash of (seed, frame, pixel, sample) and a
-dimension index, so an image never depends on the thread count, the tiling or the
-batch size (architecture.md, "Determinism").  The hash is SplitMix64's finaliser.
+Every random number is a pure function of (seed, frame, pixel, sample) and a dimension
+index, so an image never depends on the thread count, the tiling or the batch size
+(architecture.md, "Determinism").  A path's 64-bit key packs a per-pixel scramble word
+(high 32 bits, a bijective hash of the pixel index under a hash of seed and frame, so no
+two pixels of a frame share it) and the sample index (low 32 bits).
+
+Two kinds of numbers are drawn from a key:
+
+- :func:`rand` — an independent uniform per (key, dimension): SplitMix64's finaliser.
+- :func:`sobol2` / :func:`sobol1` — *padded, Owen-scrambled Sobol* points (Burley 2020,
+  "Practical hash-based Owen scrambling"; pbrt-v4's PaddedSobolSampler).  For each
+  dimension (pair) the pixel's sample index s is shuffled by a nested uniform
+  scramble, i' = N_h(s), and the point (Sobol_0(i'), Sobol_1(i')) is Owen-scrambled per
+  coordinate.  Owen scrambling makes every point uniform on [0,1)² (unbiased), the
+  shuffle decorrelates different dimension pairs of one path, and any aligned block of
+  2^k samples of a pixel — in particular every power-of-two prefix — is a (0, k, 2)-net:
+  one point in each of the 2^k elementary rectangles of area 2^-k.  The integrator uses
+  them for the pixel position, the light sample and the BSDF direction of every bounce,
+  which is where stratification pays; 1-D decisions (roulette, lobe) use :func:`rand`.
 
 Warps map uniform numbers on [0,1)² to directions with known pdfs (solid angle):
 
@@ -25,7 +41,14 @@ _S30 = np.uint64(30)
 _S27 = np.uint64(27)
 _S31 = np.uint64(31)
 _S40 = np.uint64(40)
+_S32 = np.uint64(32)
+_S16 = np.uint64(16)
+_S15 = np.uint64(15)
+_H1 = np.uint64(0x7FEB352D)
+_H2 = np.uint64(0x846CA68B)
+_MASK32 = np.uint64(0xFFFFFFFF)
 _INV24 = np.float32(1.0 / 16777216.0)
+_INV32 = 1.0 / 4294967296.0
 INV_PI = np.float32(1.0 / math.pi)
 
 
@@ -37,12 +60,28 @@ def mix64(z):
     return z ^ (z >> _S31)
 
 
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def hash32(x):
+    """A bijective avalanche hash of a 32-bit word (in a uint64; Wellons' lowbias32)."""
+    x = x & _MASK32
+    x ^= x >> _S16
+    x = (x * _H1) & _MASK32
+    x ^= x >> _S15
+    x = (x * _H2) & _MASK32
+    return x ^ (x >> _S16)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def pixel_word(seed, frame, pixel):
+    """The pixel's 32-bit scramble word: distinct for every pixel of a frame."""
+    salt = mix64(np.uint64(seed) * _GOLDEN + np.uint64(frame))
+    return hash32((np.uint64(pixel) ^ salt) & _MASK32) ^ ((salt >> _S32) & _MASK32)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def path_key(seed, frame, pixel, sample):
-    """The RNG key of one path: hash of (seed, frame, pixel, sample)."""
-    k = mix64(np.uint64(seed) * _GOLDEN + np.uint64(frame))
-    k = mix64(k + np.uint64(pixel) * _GOLDEN)
-    return mix64(k ^ (np.uint64(sample) * _M2))
+    """The key of one path: pixel_word(seed, frame, pixel) << 32 | sample (32 bits)."""
+    return (pixel_word(seed, frame, pixel) << _S32) | (np.uint64(sample) & _MASK32)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -59,6 +98,112 @@ def rand(key, dim):
     """Uniform float32 in [0, 1) for dimension ``dim`` of the path with ``key``."""
     x = mix64(key + np.uint64(dim + 1) * _GOLDEN)
     return np.float32(x >> _S40) * _INV24
+
+
+_R1 = np.uint64(0x55555555)
+_R2 = np.uint64(0x33333333)
+_R4 = np.uint64(0x0F0F0F0F)
+_R8 = np.uint64(0x00FF00FF)
+_U1 = np.uint64(1)
+_U2 = np.uint64(2)
+_U4 = np.uint64(4)
+_U8 = np.uint64(8)
+_LK = (np.uint64(0x6C50B47C), np.uint64(0xB82F1E52), np.uint64(0xC7AFE638),
+       np.uint64(0x8D22F6E6))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def reverse32(x):
+    """The 32 low bits of x in reverse order."""
+    x = ((x >> _U1) & _R1) | ((x & _R1) << _U1)
+    x = ((x >> _U2) & _R2) | ((x & _R2) << _U2)
+    x = ((x >> _U4) & _R4) | ((x & _R4) << _U4)
+    x = ((x >> _U8) & _R8) | ((x & _R8) << _U8)
+    return ((x >> _S16) | (x << _S16)) & _MASK32
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def laine_karras(x, seed):
+    """A random permutation of 32-bit words in which bit k depends only on bits ≤ k.
+
+    Applied to bit-reversed numbers it is an Owen (nested uniform) scramble: each
+    digit of the binary fraction is flipped by a hash of the digits before it
+    (Burley 2020's constants).
+    """
+    x = (x + seed) & _MASK32
+    x ^= (x * _LK[0]) & _MASK32
+    x ^= (x * _LK[1]) & _MASK32
+    x ^= (x * _LK[2]) & _MASK32
+    x ^= (x * _LK[3]) & _MASK32
+    return x
+
+
+def _sobol1_byte_tables() -> np.ndarray:
+    """T[b, x] = the second Sobol dimension's contribution of byte b of the index having
+    value x; direction numbers v_0 = 2^31, v_k = v_(k-1) xor (v_(k-1) >> 1)
+    (primitive polynomial x + 1)."""
+    v = [1 << 31]
+    for _ in range(31):
+        v.append(v[-1] ^ (v[-1] >> 1))
+    t = np.zeros((4, 256), np.uint64)
+    for b in range(4):
+        for x in range(256):
+            y = 0
+            for k in range(8):
+                if x >> k & 1:
+                    y ^= v[8 * b + k]
+            t[b, x] = y
+    return t
+
+
+_SOBOL1 = _sobol1_byte_tables()
+_BYTE = np.uint64(0xFF)
+_S8 = np.uint64(8)
+_S24 = np.uint64(24)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def sobol1_bits(i):
+    """The second Sobol dimension of a 32-bit index i as a 32-bit binary fraction."""
+    return (_SOBOL1[0, i & _BYTE] ^ _SOBOL1[1, (i >> _S8) & _BYTE]
+            ^ _SOBOL1[2, (i >> _S16) & _BYTE] ^ _SOBOL1[3, (i >> _S24) & _BYTE])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _dim_seeds(key, dim):
+    h = mix64((key >> _S32) * _GOLDEN + np.uint64(dim + 1) * _M2)
+    return h & _MASK32, h >> _S32
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def sobol2(key, dim):
+    """The Owen-scrambled, shuffled Sobol point (u1, u2) ∈ [0,1)² of a path (float64).
+
+    Pair ``dim`` of the pixel's sample ``key & 0xffffffff``; see the module docstring.
+    """
+    h_shuffle, h_x = _dim_seeds(key, dim)
+    i = reverse32(laine_karras(reverse32(key & _MASK32), h_shuffle))
+    # x: Sobol_0(i) = reverse(i); its Owen scramble is reverse(LK(reverse(reverse(i))))
+    x = reverse32(laine_karras(i, h_x))
+    y = reverse32(laine_karras(reverse32(sobol1_bits(i)), mix64(h_x) & _MASK32))
+    return np.float64(x) * _INV32, np.float64(y) * _INV32
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def sobol1(key, dim):
+    """The Owen-scrambled, shuffled van der Corput number of dimension ``dim`` (float64)."""
+    h_shuffle, h_x = _dim_seeds(key, dim)
+    i = reverse32(laine_karras(reverse32(key & _MASK32), h_shuffle))
+    return np.float64(reverse32(laine_karras(i, h_x))) * _INV32
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def sobol2_dims(keys, dim):
+    """sobol2(key, dim) for every key of a wavefront: (N, 2) float64."""
+    out = np.empty((len(keys), 2), np.float64)
+    for k in range(len(keys)):
+        out[k, 0], out[k, 1] = sobol2(keys[k], dim)
+    return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -119,7 +264,6 @@ def power_heuristic(pa, pb):
     return a / (a + b) if a + b > 0.0 else 0.0
 
 
-_MASK32 = np.uint64(0xFFFFFFFF)
 _SWAP_MASKS = np.array([0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF, 0x0000FFFF], np.uint64)
 
 

@@ -7,7 +7,7 @@ import numpy as np
 from relray.core import relativity
 from relray.core.camera import PinholeCamera
 from relray.core.job import look_at_rotation
-from relray.core.sampling import path_keys, rand_dims
+from relray.core.sampling import path_keys, sobol2_dims
 
 
 def camera(width=40, height=30, fov=50.0):
@@ -29,8 +29,9 @@ def test_primary_rays_at_rest_are_the_jittered_pinhole():
     pix = np.arange(cam.width * cam.height, dtype=np.int64)
     keys = path_keys(0, 1, pix, np.zeros_like(pix))
     o, d, D, skipped = cam.primary_rays(np.zeros(3), keys, pix, np.zeros(3), 100.0)
-    col = pix % cam.width + rand_dims(keys, 0)
-    row = pix // cam.width + rand_dims(keys, 1)
+    jitter = sobol2_dims(keys, 0)
+    col = pix % cam.width + jitter[:, 0]
+    row = pix // cam.width + jitter[:, 1]
     np.testing.assert_allclose(d, cam.directions_cam(col, row), atol=1e-7)   # float32 out
     assert np.all(D == 1.0) and np.all(skipped == 0.0) and np.all(o == 0.0)
 
@@ -41,8 +42,8 @@ def test_primary_rays_are_aberrated_and_doppler_shifted():
     pix = np.arange(cam.width * cam.height, dtype=np.int64)
     keys = path_keys(0, 1, pix, np.zeros_like(pix))
     _, d, D, _ = cam.primary_rays(beta, keys, pix, np.zeros(3), 100.0)
-    d_cam = cam.directions_cam(pix % cam.width + rand_dims(keys, 0),
-                               pix // cam.width + rand_dims(keys, 1))
+    jitter = sobol2_dims(keys, 0)
+    d_cam = cam.directions_cam(pix % cam.width + jitter[:, 0], pix // cam.width + jitter[:, 1])
     np.testing.assert_allclose(d, relativity.aberrate(d_cam, beta), atol=1e-7)
     np.testing.assert_allclose(D, relativity.doppler_factor(d_cam, beta), rtol=1e-14)
 

@@ -86,3 +86,81 @@ def test_progressive_offsets_are_uniform_over_pixels():
     u = sampling.progressive_offsets(0, 0, np.arange(n), np.full(n, 5, np.int64))
     counts, _ = np.histogram(u, bins=20, range=(0, 1))
     assert np.all(np.abs(counts - n / 20) < 5 * math.sqrt(n / 20))
+
+
+def _is_net(u: np.ndarray) -> bool:
+    """Is the point set (n = 2^m points in [0,1)²) a (0, m, 2)-net in base 2: one point
+    in every elementary rectangle 2^-a x 2^-(m-a)?"""
+    m = int(math.log2(len(u)))
+    for a in range(m + 1):
+        cells = np.floor(u[:, 0] * 2**a).astype(np.int64) * 2 ** (m - a) \
+            + np.floor(u[:, 1] * 2 ** (m - a)).astype(np.int64)
+        if len(np.unique(cells)) != len(u):
+            return False
+    return True
+
+
+def test_sobol_pairs_are_nets_in_every_aligned_power_of_two_block():
+    """Progressive stratification: prefixes and aligned blocks of a pixel's samples."""
+    n = 1024
+    for dim in (0, 3, 11):
+        keys = sampling.path_keys(5, 2, np.full(n, 1234, np.int64), np.arange(n))
+        u = sampling.sobol2_dims(keys, dim)
+        assert u.min() >= 0.0 and u.max() < 1.0
+        for m in (1, 2, 4, 6, 8, 10):
+            assert _is_net(u[: 2**m]), (dim, m)
+        assert _is_net(u[256:512]) and _is_net(u[64:128])
+
+
+def test_a_random_point_set_is_not_a_net():
+    """The net check can fail: i.i.d. points are (almost surely) not a 64-point net."""
+    keys = sampling.path_keys(5, 2, np.full(64, 1234, np.int64), np.arange(64))
+    u = np.stack([sampling.rand_dims(keys, 0), sampling.rand_dims(keys, 1)], 1)
+    assert not _is_net(u)
+
+
+def test_sobol_points_are_uniform_over_pixels():
+    """For a fixed sample index the per-pixel Owen scramble makes the point uniform on
+    [0,1)² (unbiasedness): a 10 x 10 chi-square over 200k pixels."""
+    n = 200_000
+    for s in (0, 7):
+        keys = sampling.path_keys(1, 0, np.arange(n), np.full(n, s, np.int64))
+        u = sampling.sobol2_dims(keys, 4)
+        h, _, _ = np.histogram2d(u[:, 0], u[:, 1], bins=10, range=[[0, 1], [0, 1]])
+        chi2 = float(np.sum((h - n / 100) ** 2 / (n / 100)))
+        assert chi2 < 99 + 5 * math.sqrt(2 * 99), chi2   # df = 99
+
+
+def test_sobol_dimension_pairs_are_decorrelated():
+    """The per-dimension index shuffle (padding): pairs 3 and 4 of one pixel's samples
+    are uncorrelated, whereas without the shuffle they would be the same points."""
+    n = 4096
+    keys = sampling.path_keys(0, 0, np.full(n, 99, np.int64), np.arange(n))
+    a, b = sampling.sobol2_dims(keys, 3), sampling.sobol2_dims(keys, 4)
+    for i in range(2):
+        for j in range(2):
+            assert abs(np.corrcoef(a[:, i], b[:, j])[0, 1]) < 5 / math.sqrt(n)
+
+
+def test_sobol1_stratifies_prefixes():
+    n = 256
+    keys = sampling.path_keys(0, 3, np.full(n, 7, np.int64), np.arange(n))
+    u = np.array([sampling.sobol1(k, 9) for k in keys])
+    for m in (2, 5, 8):
+        assert np.array_equal(np.sort(np.floor(u[: 2**m] * 2**m)), np.arange(2**m))
+
+
+def test_pixel_words_are_distinct_within_a_frame():
+    """Every pixel of a frame gets its own scramble (no two pixels share a sequence)."""
+    n = 1 << 20
+    keys = sampling.path_keys(42, 7, np.arange(n), np.zeros(n, np.int64))
+    assert len(np.unique(keys >> np.uint64(32))) == n
+    assert np.all(keys & np.uint64(0xFFFFFFFF) == 0)
+
+
+def test_sobol1_bits_match_the_direction_numbers():
+    """The byte tables give Sobol's dimension 1 in index (not Gray-code) order:
+    x_i = xor of v_k over the set bits k of i, v = 1/2, 3/4, 5/8, ..."""
+    ref = [0.0, 0.5, 0.75, 0.25, 0.625, 0.125, 0.375, 0.875]
+    got = [float(sampling.sobol1_bits(np.uint64(i))) / 2**32 for i in range(8)]
+    assert got == ref

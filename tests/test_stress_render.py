@@ -503,7 +503,7 @@ def test_d5_beyond_float32_is_zeroed_with_one_warning(tmp_path, caplog):
 
 
 def test_error_falls_like_one_over_sqrt_n(tmp_path):
-    """The estimator's error falls like N^-½: fit ln(RMS error) against ln N.
+    """The estimator's error falls at least like N^-½, with no bias floor.
 
     Set-up: the white furnace of test_render_physics.test_white_furnace (albedo-1 sphere
     on an albedo-1 floor under a uniform white sky) seen by a camera moving at β = 0.5
@@ -517,12 +517,18 @@ def test_error_falls_like_one_over_sqrt_n(tmp_path):
     Gaussian pixel errors it is 1/sqrt(2P)). A weighted fit over x = ln N (spacing ln 4)
     has SE(slope) = 1/sqrt(Σ w (x - x̄)²), w = 1/SE(ln e)². With P = 48 x 32 = 1536 and
     Gaussian errors SE(slope) = sqrt(1/(2P)) / sqrt(Σ (x - x̄)²) = 0.018/3.1 = 0.006
-    (measured: 0.006). We require SE(slope) <= 0.02, so that [-0.6, -0.4] is at least
-    ±5 SE around -0.5, and then the slope inside it. A bias b flattens the curve
-    (e² = b² + σ²/N); correlated samples change its slope.
-    Expected slightly below -0.5: the hero wavelengths are stratified over a pixel's
-    samples (van der Corput), so their share of the error falls faster than N^-½
-    (measured -0.54; the i.i.d. path sampling dominates).
+    (measured: 0.009). We require SE(slope) <= 0.02.
+
+    Expected: steeper than -0.5. The pixel position, light and BSDF samples are
+    Owen-scrambled Sobol points and the hero wavelengths van der Corput, all stratified
+    over a pixel's samples, so their share of the error falls faster than N^-½ (up to
+    N^-1.5 for smooth integrands); the i.i.d. parts (roulette, lobe choice) fall like
+    N^-½ and take over at large N, so the local slope flattens towards -0.5 (measured:
+    fit -0.74; segments -0.89, -0.71, -0.54). A bias b flattens it further, towards 0
+    (e² = b² + σ²/N), and perfectly correlated samples would not converge at all. So
+    the fitted slope must lie in [-1.5, -0.5 + 5 SE] and the last segment (the largest
+    N, where a bias shows first) must not be flatter than -0.5 + 5 SE(segment), with
+    SE(segment) = sqrt(SE(ln e_a)² + SE(ln e_b)²) / ln 4.
     """
     W, H = pick((48, 32), (96, 64))
     levels = pick([4, 16, 64, 256], [4, 16, 64, 256, 1024])
@@ -551,7 +557,10 @@ def test_error_falls_like_one_over_sqrt_n(tmp_path):
     slope = float(np.sum(w * (x - xm) * (y - ym)) / sxx)
     slope_se = 1.0 / math.sqrt(sxx)
     assert slope_se <= 0.02, slope_se
-    assert -0.6 <= slope <= -0.4, (slope, slope_se, y)
+    assert -1.5 <= slope <= -0.5 + 5.0 * slope_se, (slope, slope_se, y)
+    seg = (y[-1] - y[-2]) / (x[-1] - x[-2])
+    seg_se = math.hypot(se[-1], se[-2]) / (x[-1] - x[-2])
+    assert seg <= -0.5 + 5.0 * seg_se, (seg, seg_se, y)
 
 
 # =========================================================================== resources
