@@ -31,7 +31,7 @@ import math
 
 from numba import njit
 
-from .sampling import INV_PI, onb, to_world
+from .sampling import INV_PI, onb, sincos_2pi, to_world
 
 DELTA_ALPHA = 1e-3
 
@@ -87,9 +87,9 @@ def ggx_sample_h(wo, n, alpha, u1, u2):
     t2y = vz * t1x - vx * t1z
     t2z = vx * t1y - vy * t1x
     r = math.sqrt(u1)
-    phi = 2.0 * math.pi * u2
-    p1 = r * math.cos(phi)
-    p2 = r * math.sin(phi)
+    c, sn = sincos_2pi(u2)
+    p1 = r * c
+    p2 = r * sn
     s = 0.5 * (1.0 + vz)
     p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
     p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
