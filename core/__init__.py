@@ -9,3 +9,46 @@ import os
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+
+def kernel_source_digest(folder) -> str:
+    """SHA-1 over the names and bytes of the modules in ``folder`` that define numba
+    kernels (those whose source mentions ``njit``), in name order."""
+    import hashlib
+    from pathlib import Path
+
+    digest = hashlib.sha1()
+    for path in sorted(Path(folder).glob("*.py")):
+        source = path.read_bytes()
+        if b"njit" in source:
+            digest.update(path.name.encode())
+            digest.update(source)
+    return digest.hexdigest()
+
+
+def kernel_cache_dir(environ=os.environ) -> str:
+    """Where numba keeps the core's compiled kernels: ``<base>/relray-<digest>``.
+
+    numba re-checks only the timestamp of the file that defines a cached kernel, not the
+    modules whose functions the kernel inlined (``sampling``, ``bsdf``, ``spectrum`` ...),
+    so a kernel compiled against an older sampler would be reused after an update; the
+    folder is therefore keyed by :func:`kernel_source_digest` of this package. ``<base>``
+    is ``NUMBA_CACHE_DIR`` from the environment, else the user's cache folder
+    (``%LOCALAPPDATA%``, ``$XDG_CACHE_HOME`` or ``~/.cache``)/relray/numba.
+    """
+    base = environ.get("NUMBA_CACHE_DIR")
+    if not base:
+        root = environ.get("LOCALAPPDATA" if os.name == "nt" else "XDG_CACHE_HOME")
+        base = os.path.join(root or os.path.join(os.path.expanduser("~"), ".cache"),
+                            "relray", "numba")
+    digest = kernel_source_digest(os.path.dirname(os.path.abspath(__file__)))
+    return os.path.join(base, "relray-" + digest[:16])
+
+
+def _use_kernel_cache() -> None:
+    import numba
+
+    numba.config.CACHE_DIR = kernel_cache_dir()
+
+
+_use_kernel_cache()
