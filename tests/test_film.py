@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from relray.core.film import REL_ERROR_UNKNOWN, Film, band_centers
+from relray.core.film import REL_ERROR_UNKNOWN, Film, band_centers, window_mean
 
 AOVS = ("depth", "doppler", "lab_time")
 
@@ -34,7 +34,7 @@ def _slice(s: dict, a: int, b: int) -> dict:
 
 
 def _sums(f: Film) -> list[np.ndarray]:
-    return [f.sum_sensor, f.sum_y2, f.sum_alpha, f.sum_aov, f.count, f.sum_band]
+    return [f.sum_sensor, f.sum_sq, f.sum_alpha, f.sum_aov, f.count, f.sum_band]
 
 
 def test_band_centers_inclusive():
@@ -265,3 +265,150 @@ def test_input_validation():
     f.add_samples(np.array([0]), **ok, **lam)
     f.add_samples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), {"depth": np.zeros(0)})
     assert f.total_samples == 1
+
+
+# ----------------------------------------------------------------------------- adaptive
+def _grid_stream(per_pixel, n, seed=0):
+    """n samples for every pixel; ``per_pixel(p, rng, n)`` returns its (n, 3) sensor values."""
+    rng = np.random.default_rng(seed)
+    pixels = len(per_pixel)
+    pix = np.repeat(np.arange(pixels), n)
+    sensor = np.concatenate([f(p, rng, n) for p, f in enumerate(per_pixel)])
+    return pix, sensor
+
+
+def test_sum_sq_holds_every_channel_and_sum_y2_is_its_luminance_column():
+    s = _stream(3000, 12, seed=11, bands=False)
+    f = Film(4, 3)
+    f.add_samples(s["pixel"], s["sensor"], s["alpha"])
+    x = s["sensor"].astype(np.float64)
+    for p in range(12):
+        np.testing.assert_allclose(f.sum_sq[p], (x[s["pixel"] == p] ** 2).sum(0), rtol=1e-12)
+    np.testing.assert_array_equal(f.sum_y2, f.sum_sq[:, 1])
+
+
+def test_adaptive_error_is_the_documented_estimator():
+    """se = sqrt(Σ_c var_c / n) over the three channels, divided by sqrt(I · Ī) with
+    I = |mean sensor vector| and Ī its image mean (core/film.py docstring)."""
+    rng = np.random.default_rng(12)
+    n_pix, n = 20, 300
+    scale = rng.uniform(0.1, 3.0, (n_pix, 1, 3))
+    noise = rng.uniform(0.0, 1.0, (n_pix, 1, 3))
+    x = scale * (1.0 + noise * rng.standard_normal((n_pix, n, 3)))
+    f = Film(5, 4)
+    f.add_samples(np.repeat(np.arange(n_pix), n), x.reshape(-1, 3), np.ones(n_pix * n))
+    m = x.mean(axis=1)
+    se = np.sqrt((x.var(axis=1, ddof=1) / n).sum(axis=1))
+    bright = np.linalg.norm(m, axis=1)
+    expect = se / np.sqrt(bright * bright.mean())
+    np.testing.assert_allclose(f.adaptive_error().ravel(), expect, rtol=1e-9)
+
+
+def test_adaptive_error_properties():
+    # scale-free: multiplying every sample by k leaves it unchanged
+    s = _stream(4000, 12, seed=13, bands=False)
+    a, b = Film(4, 3), Film(4, 3)
+    a.add_samples(s["pixel"], s["sensor"].astype(np.float64), s["alpha"])
+    b.add_samples(s["pixel"], s["sensor"].astype(np.float64) * 1024.0, s["alpha"])
+    np.testing.assert_allclose(a.adaptive_error(), b.adaptive_error(), rtol=1e-12)
+    # a pixel as bright as the image mean reports its relative standard error; darker
+    # pixels with the same relative noise report less (by sqrt of the brightness ratio)
+    rng = np.random.default_rng(14)
+    n = 4000
+    levels = np.array([1.0, 0.25, 1.75])       # mean of the image = 1.0
+    rel = 0.5
+    x = levels[:, None, None] * (1.0 + rel * rng.standard_normal((3, n, 1))) * np.ones(3)
+    f = Film(3, 1)
+    f.add_samples(np.repeat(np.arange(3), n), x.reshape(-1, 3), np.ones(3 * n))
+    err = f.adaptive_error().ravel()
+    assert abs(err[0] / (rel / np.sqrt(n)) - 1.0) < 0.06
+    assert abs(err[1] / err[0] - 0.5) < 0.05     # sqrt(0.25 / 1)
+    # black pixels: 0; fewer than 2 samples: unknown; nothing non-finite
+    g = Film(3, 1)
+    g.add_samples(np.array([0, 0, 1, 2, 2]), np.array([[0.0] * 3] * 2 + [[1.0] * 3] * 3),
+                  np.ones(5))
+    e = g.adaptive_error().ravel()
+    assert e[0] == 0.0 and e[1] == REL_ERROR_UNKNOWN and e[2] == 0.0
+    with np.errstate(all="raise"):
+        empty = Film(2, 2).adaptive_error()
+    assert (empty == REL_ERROR_UNKNOWN).all()
+
+
+def test_adaptive_error_sees_colour_noise_that_luminance_misses():
+    """X and Z fluctuate in opposite directions while Y is constant (spectral colour
+    noise): the luminance error is 0, the adaptive error is not."""
+    rng = np.random.default_rng(15)
+    n = 500
+    u = rng.standard_normal(n)
+    x = np.stack([1.0 + 0.5 * u, np.ones(n), 1.0 - 0.5 * u], axis=1)
+    f = Film(1, 1)
+    f.add_samples(np.zeros(n, np.int64), x, np.ones(n))
+    assert f.relative_error()[0, 0] == 0.0
+    assert f.adaptive_error()[0, 0] > 0.01
+
+
+def test_window_mean_clips_at_the_border():
+    a = np.arange(12, dtype=np.float64).reshape(3, 4)
+    w = window_mean(a)
+    for y in range(3):
+        for x in range(4):
+            nb = a[max(0, y - 1):y + 2, max(0, x - 1):x + 2]
+            assert w[y, x] == pytest.approx(nb.mean())
+    np.testing.assert_array_equal(window_mean(np.full((1, 1), 7.0)), [[7.0]])
+
+
+def test_converged_flat_region_stops_noisy_region_and_its_border_do_not():
+    """A 9x6 film: the left half constant (no noise), columns 6-8 noisy. Flat pixels
+    stop unless a noisy pixel is in their 3x3 window; noisy pixels do not stop."""
+    w, h, n = 9, 6, 64
+
+    def flat(p, rng, n):
+        return np.full((n, 3), 0.5)
+
+    def noisy(p, rng, n):
+        return 0.5 * (1.0 + 2.0 * rng.standard_normal((n, 1))) * np.ones(3)
+
+    per_pixel = [noisy if p % w >= 6 else flat for p in range(w * h)]
+    pix, sensor = _grid_stream(per_pixel, n, seed=16)
+    f = Film(w, h)
+    f.add_samples(pix, sensor, np.ones(len(pix)))
+    err = f.adaptive_error()
+    assert (err[:, :6] == 0.0).all() and (err[:, 6:] > 0.1).all()
+    conv = f.converged(0.05)         # noisy pixels: ~0.25; window of column 5: ~0.08
+    assert conv[:, :5].all()           # flat, all neighbours flat
+    assert not conv[:, 5].any()        # flat, but next to the noisy columns
+    assert not conv[:, 6:].any()       # noisy
+    assert f.converged(1e3).all()
+
+
+def test_converged_needs_the_pixel_itself_below_the_threshold():
+    """One noisy pixel amid flat ones: its window mean is 1/9 of its error, but it must
+    not stop while its own error is above the threshold."""
+    w = h = 5
+    centre = 12
+
+    def px(p, rng, n):
+        if p == centre:
+            return (1.0 + rng.standard_normal((n, 1))) * np.ones(3)
+        return np.ones((n, 3))
+
+    pix, sensor = _grid_stream([px] * (w * h), 100, seed=17)
+    f = Film(w, h)
+    f.add_samples(pix, sensor, np.ones(len(pix)))
+    e = f.adaptive_error()[2, 2]
+    conv = f.converged(0.5 * e)      # window mean e/9 < threshold < e
+    assert not conv[2, 2] and conv.sum() == w * h - 1
+    conv = f.converged(0.05 * e)     # below e/9: the neighbours wait too
+    assert not conv[1:4, 1:4].any()
+    assert conv[0].all() and conv[4].all() and conv[:, 0].all() and conv[:, 4].all()
+
+
+def test_merge_adds_the_squares():
+    s = _stream(2000, 12, seed=18, bands=False)
+    whole, a, b = Film(4, 3), Film(4, 3), Film(4, 3)
+    whole.add_samples(s["pixel"], s["sensor"], s["alpha"])
+    a.add_samples(s["pixel"][:700], s["sensor"][:700], s["alpha"][:700])
+    b.add_samples(s["pixel"][700:], s["sensor"][700:], s["alpha"][700:])
+    a.merge(b)
+    np.testing.assert_allclose(a.sum_sq, whole.sum_sq, rtol=1e-12)
+    np.testing.assert_allclose(a.adaptive_error(), whole.adaptive_error(), rtol=1e-9)
