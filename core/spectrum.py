@@ -11,6 +11,8 @@ What it provides (docs/interfaces.md, "core/spectrum.py"; physics.md, "Spectral 
   :func:`sensor_to_rgb` for ``spectral = "cie1931" | "seed-gaussian" | "rgb"``;
 * **hero-wavelength sampling** (Wilkie et al. 2014): :class:`WavelengthSampler`,
   :func:`make_sampler` (an inverse-CDF table, with a uniform part for ``spectral_bands``);
+  :meth:`WavelengthSampler.lanes` is a wavefront's whole spectral camera stage in one
+  kernel pass (hero λ, pdf, Doppler-shifted table coordinates, D⁵, D's range);
 * **tables** for the job keys:
 
   ==========================================  ==============================================
@@ -26,7 +28,11 @@ What it provides (docs/interfaces.md, "core/spectrum.py"; physics.md, "Spectral 
   ==========================================  ==============================================
 
 * helpers: :func:`d65_ext`, :func:`planck`, :func:`y_of`, :func:`rgb_of`,
-  :func:`blackbody_rgb`, :func:`sigmoid_coefficients`.
+  :func:`blackbody_rgb`, :func:`sigmoid_coefficients`, :func:`normalised_primary_matrix`.
+
+The CIE source data (CMFs, D65, the sRGB primaries) come from colour-science but are
+embedded in :mod:`.cie_tables` (a test keeps them equal), so no render imports
+colour-science (1.3 s per process); every derived table is built lazily, in ms.
 
 Conventions.  Wavelengths are in nm.  Sensor integrals are ``∫ r(λ) L(λ) dλ`` over 360–830 nm,
 evaluated (here and for every normalisation) as the 1 nm trapezoid rule with the float32
@@ -52,10 +58,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
+from . import cie_tables as _cie
 from . import sigmoid as _sig
 
 # --------------------------------------------------------------------------- the grid
@@ -154,12 +162,8 @@ def _check_mode(mode: str) -> None:
 @lru_cache(maxsize=4)
 def _sensor_response(mode: str) -> np.ndarray:
     lam = sensor_nm()
-    if mode == "cie1931":
-        import colour
-
-        cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy()
-        cmfs = cmfs.align(colour.SpectralShape(SENSOR_MIN_NM, SENSOR_MAX_NM, 1.0))
-        return np.ascontiguousarray(cmfs.values.T, dtype=np.float32)
+    if mode == "cie1931":  # colour-science's table, embedded (see cie_tables)
+        return np.ascontiguousarray(_cie.CMF_CIE1931_2.T, dtype=np.float32)
     if mode == "seed-gaussian":
         mu = np.asarray(SEED_MU_NM)[:, None]
         sd = np.asarray(SEED_SIGMA_NM)[:, None]
@@ -197,21 +201,34 @@ def _sensor_weights(mode: str) -> np.ndarray:
 def _sensor_to_rgb(mode: str) -> np.ndarray:
     if mode != "cie1931":
         return np.eye(3)
-    import colour
-
     xyz_w = _sensor_weights("cie1931") @ lookup(_d65_ext32(), sensor_nm())
     white_xy = xyz_w[:2] / np.sum(xyz_w)
-    primaries = colour.RGB_COLOURSPACES["sRGB"].primaries
-    rgb_to_xyz = colour.normalised_primary_matrix(primaries, white_xy)
+    rgb_to_xyz = normalised_primary_matrix(_cie.PRIMARIES_SRGB_XY, white_xy)
     return np.linalg.inv(rgb_to_xyz)
+
+
+def normalised_primary_matrix(primaries_xy: np.ndarray, white_xy: np.ndarray) -> np.ndarray:
+    """RGB → XYZ matrix (3, 3) of primaries xy (3, 2) and a white point xy (Y_white = 1).
+
+    colour-science's ``normalised_primary_matrix`` step by step (the same float64 operations,
+    so the same bits): columns P = (x, y, 1-x-y) of the primaries, scaled by S = P⁻¹ W with
+    W = (x/y, 1, (1-x-y)/y) of the white.
+    """
+    p = np.asarray(primaries_xy, np.float64).reshape(3, 2)
+    prim = np.transpose(np.hstack([p, (1 - p[:, 0] - p[:, 1])[:, None]]))
+    x, y = (float(c) for c in np.asarray(white_xy, np.float64))
+    y_y = 1.0 / y
+    white = np.array([x * y_y, 1.0, (1 - x - y) * y_y])
+    return np.dot(prim, np.diagflat(np.dot(np.linalg.inv(prim), white)))
 
 
 def sensor_to_rgb(mode: str) -> np.ndarray:
     """Matrix (3, 3) float64 from sensor values to linear Rec.709.
 
-    "cie1931": XYZ → linear Rec.709 built by colour-science's ``normalised_primary_matrix``
-    from the sRGB primaries and the white point of :func:`d65_ext` (its own chromaticity
-    under the 1 nm CMFs, x ≈ 0.31272, y ≈ 0.32903), so D65_ext maps to exactly (1, 1, 1).
+    "cie1931": XYZ → linear Rec.709 built by :func:`normalised_primary_matrix` (the same
+    bits as colour-science's) from the sRGB primaries and the white point of
+    :func:`d65_ext` (its own chromaticity under the 1 nm CMFs, x ≈ 0.31272, y ≈ 0.32903),
+    so D65_ext maps to exactly (1, 1, 1).
     Its entries differ from colour-science's sRGB matrix (white 0.3127, 0.3290) by < 1e-3.
     "seed-gaussian" and "rgb": identity.
     """
@@ -245,7 +262,25 @@ def rgb_of(table: np.ndarray, mode: str = "cie1931") -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- sampling
-GUIDE_SIZE = 2048  # entries of the inverse-CDF guide table
+GUIDE_SIZE = 8192  # entries of the inverse-CDF guide table (int32: 32 KiB, L1-resident)
+
+
+class HeroLanes(NamedTuple):
+    """The spectral part of a wavefront's camera stage (:meth:`WavelengthSampler.lanes`).
+
+    ``lam`` camera-frame hero wavelengths (N, 4) nm, ``pdf`` their pdfs (N, 4) 1/nm (both
+    float64, as :meth:`WavelengthSampler.hero`), ``lamu`` the lab-table coordinates (N, 4)
+    float32 (as :func:`grid_coordinates`), ``w_d`` the searchlight weight D⁵ or 1 (N,),
+    ``d_min`` / ``d_max`` the extremes of D over the rows (inf / 0 for N = 0).
+    """
+
+    lam: np.ndarray
+    pdf: np.ndarray
+    lamu: np.ndarray
+    w_d: np.ndarray
+    d_min: float
+    d_max: float
+
 
 @dataclass(frozen=True, eq=False)
 class WavelengthSampler:
@@ -259,13 +294,20 @@ class WavelengthSampler:
     cdf: np.ndarray
     pdf: np.ndarray
     guide: np.ndarray = field(init=False, repr=False)
+    bin_u: np.ndarray = field(init=False, repr=False)
+    bin_rw: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         # guide[g] = the bin holding u = g/G, so the inverse CDF starts its search there
         g = np.arange(GUIDE_SIZE) / GUIDE_SIZE
         k = self.pdf.shape[0]
         guide = np.clip(np.searchsorted(self.cdf, g, side="right") - 1, 0, k - 1)
-        object.__setattr__(self, "guide", guide.astype(np.int64))
+        object.__setattr__(self, "guide", guide.astype(np.int32))
+        # for lanes(): the grid coordinate of each bin's lower edge and its width / edge,
+        # so ln λ = ln lo + log1p((λ - lo)/lo) needs no log per wavelength
+        lo = np.asarray(self.edges_nm[:-1], np.float64)
+        object.__setattr__(self, "bin_u", (np.log(lo) - LOG_GRID_MIN) * INV_DLOG)
+        object.__setattr__(self, "bin_rw", np.diff(self.edges_nm) / lo)
 
     def sample(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Inverse CDF: u ∈ [0, 1] -> (λ nm, pdf(λ) 1/nm), float64, same shape as u.
@@ -303,6 +345,43 @@ class WavelengthSampler:
         _hero_kernel(self.cdf, self.edges_nm, self.pdf, self.guide, u, lam, pdf)
         return lam, pdf
 
+    def lanes(self, u: np.ndarray, D: np.ndarray | None = None, doppler: bool = True,
+              searchlight: bool = False,
+              out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None,
+              ) -> HeroLanes:
+        """A wavefront's spectral camera stage in one pass: :meth:`hero` (4 lanes) fused
+        with :func:`grid_coordinates` and the searchlight weight.
+
+        ``u`` (N,) offsets in [0, 1); ``D`` (N,) Doppler factors (None: all 1).  λ and pdf
+        equal ``hero(u)`` bit for bit; ``lamu`` equals ``grid_coordinates(λ, D if doppler
+        else None)`` up to float32 rounding (ln λ comes from the bin's edge and a series
+        of degree 4 in (λ - lo)/lo < 1/360, error < 1e-13, instead of a log per lane);
+        ``w_d`` = D⁵ (as D²·D²·D) when ``searchlight``, else 1; and the min / max of D.
+        ``out = (lam, pdf, lamu, w_d)``: preallocated C-contiguous outputs ((≥N, 4) f64,
+        (≥N, 4) f64, (≥N, 4) f32, (≥N,) f64) whose first N rows are written and returned
+        (so a caller can reuse its buffers across wavefronts).
+        """
+        u = np.ascontiguousarray(u, dtype=np.float64).reshape(-1)
+        n = u.shape[0]
+        if out is None:
+            lam, pdf = np.empty((n, 4)), np.empty((n, 4))
+            lamu, w_d = np.empty((n, 4), np.float32), np.empty(n)
+        else:
+            if any(a.shape[0] < n for a in out) or any(a.shape[1:] != (4,) for a in out[:3]):
+                raise ValueError(f"lanes: out buffers too small for {n} rows or not (·, 4)")
+            lam, pdf, lamu, w_d = (a[:n] for a in out)
+        if D is None:
+            d, use_d = u, False  # any float64 (N,) array: not read
+        else:
+            d, use_d = np.ascontiguousarray(D, dtype=np.float64).reshape(-1), True
+            if d.shape[0] != n:
+                raise ValueError(f"lanes: D has {d.shape[0]} rows, u has {n}")
+        d_min, d_max = _lanes_kernel(self.cdf, self.edges_nm, self.pdf, self.guide,
+                                     self.bin_u, self.bin_rw, u, d, use_d,
+                                     use_d and doppler, use_d and searchlight,
+                                     lam, pdf, lamu, w_d)
+        return HeroLanes(lam, pdf, lamu, w_d, d_min, d_max)
+
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _hero_kernel(cdf, edges, pdf, guide, u, lam_out, pdf_out):
@@ -328,6 +407,57 @@ def _hero_kernel(cdf, edges, pdf, guide, u, lam_out, pdf_out):
             lam_out[i, j] = min(lo + t * (hi - lo), hi * (1.0 - 2.0**-52))  # < hi, cheaper
             # than nextafter (ulp(hi) < hi 2^-52 for hi in [360, 830])
             pdf_out[i, j] = pdf[b]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _lanes_kernel(cdf, edges, pdf, guide, bin_u, bin_rw, u, D, use_d, shift_d, searchlight,
+                  lam_out, pdf_out, lamu_out, w_d):
+    """:func:`_hero_kernel` (n = 4) + :func:`_grid_coordinates` + D⁵ + min/max of D."""
+    k = pdf.shape[0]
+    g = guide.shape[0]
+    d_min = math.inf
+    d_max = 0.0
+    shift = 0.0
+    for i in range(u.shape[0]):
+        if use_d:
+            d = D[i]
+            d_min = min(d_min, d)
+            d_max = max(d_max, d)
+            if shift_d:
+                shift = math.log(d)
+            if searchlight:
+                d2 = d * d
+                w_d[i] = d2 * d2 * d
+            else:
+                w_d[i] = 1.0
+        else:
+            d_min = min(d_min, 1.0)
+            d_max = 1.0
+            w_d[i] = 1.0
+        ui = u[i]
+        if not (ui >= 0.0 and ui < 1.0):  # rare: the kernel's lanes assume u in [0, 1)
+            ui = ui - math.floor(ui)
+            if not ui < 1.0:
+                ui = 0.0
+        for j in range(4):
+            v = ui + 0.25 * j  # (u + j/4) mod 1, exactly as _hero_kernel
+            if v >= 1.0:
+                v -= 1.0
+            b = guide[min(int(v * g), g - 1)]
+            while b < k - 1 and cdf[b + 1] <= v:
+                b += 1
+            c0 = cdf[b]
+            t = min(max((v - c0) / (cdf[b + 1] - c0), 0.0), 1.0)
+            lo = edges[b]
+            hi = edges[b + 1]
+            lam_out[i, j] = min(lo + t * (hi - lo), hi * (1.0 - 2.0**-52))
+            pdf_out[i, j] = pdf[b]
+            # ln λ - ln lo = log1p(x), x = t (hi - lo)/lo ≤ 1/360: the series to x⁴ is off by
+            # < x⁵/5 < 4e-14 (the clamp of λ just below hi moves it by ~1e-16)
+            x = t * bin_rw[b]
+            l1p = x * (1.0 - x * (0.5 - x * (1.0 / 3.0 - 0.25 * x)))
+            lamu_out[i, j] = bin_u[b] + (l1p + shift) * INV_DLOG
+    return d_min, d_max
 
 
 def grid_coordinates(lam_cam: np.ndarray, doppler: np.ndarray | None = None) -> np.ndarray:
@@ -442,16 +572,12 @@ def blackbody_rgb(T_kelvin: float) -> np.ndarray:
 # CIE D65, 300–830 nm at 5 nm: colour-science's table to 780 nm and, from 785 nm, the CIE
 # D-series with the CIE 015 convention (CCT 6500·1.4388/1.4380, M1/M2 rounded), which
 # reproduces the tabulated standard to < 1e-3 everywhere.
+# The table is embedded in cie_tables (generated from colour-science; importing colour-science
+# at run time cost 1.3 s per process).
 @lru_cache(maxsize=1)
 def _d65_5nm() -> tuple[np.ndarray, np.ndarray]:
-    import colour
-
     wl = np.arange(300.0, 831.0, 5.0)
-    d65 = colour.SDS_ILLUMINANTS["D65"]
-    xy = colour.temperature.CCT_to_xy_CIE_D(6500.0 * 1.4388 / 1.4380)
-    dseries = colour.sd_CIE_illuminant_D_series(xy)
-    v = np.array([d65[w] if w <= d65.shape.end else dseries[w] for w in wl], dtype=np.float64)
-    return wl, v
+    return wl, np.array(_cie.D65_5NM, dtype=np.float64)
 
 
 @lru_cache(maxsize=1)

@@ -513,3 +513,86 @@ def test_every_table_finite_on_whole_grid():
     lam = np.geomspace(36.0, 8300.0, 1001)
     for t in tables:
         assert np.all(np.isfinite(sp.lookup(t, lam)))
+
+
+# --------------------------------------------------------------------------- fused lanes
+@pytest.mark.parametrize("kind", ["cie1931", "seed-gaussian", "bands-only"])
+def test_lanes_equal_hero_then_grid_coordinates(kind):
+    """The fused camera-side kernel = hero() + grid_coordinates() + D⁵ + D's range."""
+    s = (sp.make_sampler("cie1931", bands=(380.0, 780.0, 5.0), uniform_mix=1.0)
+         if kind == "bands-only" else sp.make_sampler(kind))  # bands-only: zero-pdf bins
+    rng = np.random.default_rng(11)
+    n = 100_000
+    u = rng.random(n)
+    u[:4] = [0.0, np.nextafter(1.0, 0.0), 0.25, 0.75]
+    D = np.exp(rng.normal(0.0, 1.5, n))  # D from ~0.003 to ~300
+    lam_ref, pdf_ref = s.hero(u)
+    for doppler in (True, False):
+        for searchlight in (True, False):
+            h = s.lanes(u, D, doppler=doppler, searchlight=searchlight)
+            np.testing.assert_array_equal(h.lam, lam_ref)
+            np.testing.assert_array_equal(h.pdf, pdf_ref)
+            ref = sp.grid_coordinates(lam_ref, D if doppler else None)
+            assert h.lamu.dtype == np.float32 and h.lamu.shape == (n, 4)
+            # ln λ from the bin edge + a series (error < 1e-13 grid cells) instead of a log:
+            # the float32 results may differ by one rounding at most
+            ulp = np.spacing(np.abs(ref))
+            assert np.all(np.abs(h.lamu - ref) <= ulp)
+            assert np.mean(h.lamu == ref) > 0.999
+            w_ref = D**5 if searchlight else np.ones(n)
+            np.testing.assert_allclose(h.w_d, w_ref, rtol=1e-15, atol=0.0)  # D²·D²·D vs pow
+            assert h.d_min == D.min() and h.d_max == D.max()
+    # no D: no shift, weight 1, D taken as 1
+    h = s.lanes(u)
+    np.testing.assert_array_equal(h.lamu, sp.grid_coordinates(lam_ref))
+    assert np.all(h.w_d == 1.0) and (h.d_min, h.d_max) == (1.0, 1.0)
+
+
+def test_lanes_write_into_given_buffers():
+    s = sp.make_sampler("cie1931")
+    cap = 64
+    out = (np.empty((cap, 4)), np.empty((cap, 4)), np.empty((cap, 4), np.float32), np.empty(cap))
+    u = np.linspace(0.0, 0.99, 10)
+    D = np.linspace(0.5, 2.0, 10)
+    h = s.lanes(u, D, searchlight=True, out=out)
+    for got, buf in zip(h[:4], out, strict=True):
+        assert got.shape[0] == 10 and np.shares_memory(got, buf)
+    np.testing.assert_array_equal(out[0][:10], s.hero(u)[0])
+    empty = s.lanes(np.empty(0), np.empty(0), out=out)
+    assert empty.lam.shape == (0, 4) and (empty.d_min, empty.d_max) == (math.inf, 0.0)
+    with pytest.raises(ValueError):
+        s.lanes(u, D[:5])
+    with pytest.raises(ValueError):  # never write past a buffer
+        s.lanes(np.zeros(cap + 1), out=out)
+
+
+# --------------------------------------------------------------------------- embedded data
+def test_embedded_cie_tables_match_colour_science():
+    """core/cie_tables.py holds colour-science's tables bit for bit (regenerate on upgrade)."""
+    from relray.core import cie_tables
+
+    ref = cie_tables.from_colour()
+    for name in ("CMF_CIE1931_2", "D65_5NM", "PRIMARIES_SRGB_XY"):
+        np.testing.assert_array_equal(getattr(cie_tables, name), ref[name], err_msg=name)
+    assert cie_tables.CMF_CIE1931_2.shape == (471, 3) and cie_tables.D65_5NM.shape == (107,)
+
+
+def test_normalised_primary_matrix_is_colour_sciences():
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        prim = np.array([[0.64, 0.33], [0.3, 0.6], [0.15, 0.06]]) + rng.normal(0, 0.02, (3, 2))
+        white = np.array([0.3127, 0.329]) + rng.normal(0, 0.01, 2)
+        np.testing.assert_array_equal(sp.normalised_primary_matrix(prim, white),
+                                      colour.normalised_primary_matrix(prim.ravel(), white))
+
+
+def test_tables_need_no_colour_science_import():
+    """Building the sensor, D65, the fit model and a reflectance does not import colour."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from relray.core import spectrum as sp; "
+            "sp.make_sampler('cie1931'); sp.sensor_to_rgb('cie1931'); sp.d65_ext(); "
+            "sp.rgb_reflectance([[0.7, 0.2, 0.1]]); sp.rgb_illuminant([1.0, 0.5, 0.2]); "
+            "assert 'colour' not in sys.modules, 'colour imported'")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=600)
