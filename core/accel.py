@@ -25,6 +25,7 @@ import numpy as np
 from embreex import mesh_construction, rtcore_scene
 
 MISS_DISTANCE = np.float32(1e30)
+_MISS_TFAR = float(MISS_DISTANCE)  # the initial tfar of intersect rays (exactly MISS_DISTANCE)
 
 
 @dataclass
@@ -73,10 +74,10 @@ class Accel:
         if len(o_local) == 0:
             e = np.empty(0, np.float32)
             return Hits(e, np.empty(0, np.int32), e, e)
-        r = self._scene.run(o_local, d, output=1)
-        prim = r["primID"]
-        t = np.where(prim >= 0, r["tfar"], MISS_DISTANCE).astype(np.float32)
-        return Hits(t, prim, r["u"], r["v"])
+        # tfar starts at MISS_DISTANCE (embreex fills its float32 tfar array with a scalar
+        # ``dists``) and Embree leaves it there on a miss, so t needs no pass of its own
+        r = self._scene.run(o_local, d, dists=_MISS_TFAR, output=1)
+        return Hits(r["tfar"], r["primID"], r["u"], r["v"])
 
     def occluded(self, o_local: np.ndarray, d: np.ndarray, tmax: np.ndarray) -> np.ndarray:
         """True where the segment ``o_local + t d``, 0 < t < tmax, is blocked."""

@@ -39,3 +39,20 @@ def test_empty_batches():
     e = np.empty((0, 3), np.float32)
     assert len(a.intersect(e, e).t) == 0
     assert len(a.occluded(e, e, np.empty(0, np.float32))) == 0
+
+
+def test_intersect_t_is_tfar_on_hits_and_miss_distance_on_misses():
+    """t comes straight from Embree's tfar (float32), started at MISS_DISTANCE."""
+    a = Accel(QUAD)
+    rng = np.random.default_rng(0)
+    o = a.local(np.column_stack([rng.uniform(-2, 2, (500, 2)), np.full(500, 3.0)]))
+    d = rng.normal(size=(500, 3))
+    d[:, 2] = -np.abs(d[:, 2]) - 0.5
+    d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+    h = a.intersect(o, d)
+    hit = h.prim >= 0
+    assert h.t.dtype == np.float32 and 0 < hit.sum() < 500
+    assert np.all(h.t[~hit] == MISS_DISTANCE) and np.all(h.t[hit] < 1e3)
+    ref = a._scene.run(o, d, output=1)  # embreex's default tfar (1e37)
+    np.testing.assert_array_equal(h.t[hit], ref["tfar"][hit])
+    np.testing.assert_array_equal(h.prim, ref["primID"])
