@@ -407,8 +407,12 @@ def add_shadows(sh_idx, blocked, sh_c, L, nlanes):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def sensor_values(L, lam, pdf, w_d, response, rgb_mode, out, lam_weight):
-    """Per-path sensor values s_c = w_D Σ_j c̄(λ_j) L_j / (4 p_j) (see module docstring)."""
+def sensor_values(L, lam, pdf, w_d, response, rgb_mode, out, lam_weight, want_lam_weight):
+    """Per-path sensor values s_c = w_D Σ_j c̄(λ_j) L_j / (4 p_j) (see module docstring).
+
+    ``lam_weight`` (the per-lane weights w_D L_j / (4 p_j), for spectral bands) is written
+    only when ``want_lam_weight``.
+    """
     n = L.shape[0]
     nbins = response.shape[1]
     for i in range(n):
@@ -419,9 +423,11 @@ def sensor_values(L, lam, pdf, w_d, response, rgb_mode, out, lam_weight):
             for c in range(3):
                 out[i, c] = L[i, c] * w_d[i]
             continue
+        wq = 0.25 * w_d[i]
         for j in range(4):
-            w = w_d[i] * L[i, j] / (4.0 * pdf[i, j])
-            lam_weight[i, j] = w
+            w = wq * L[i, j] / pdf[i, j]
+            if want_lam_weight:
+                lam_weight[i, j] = w
             x = lam[i, j] - spectrum_min_nm
             k = int(x)
             if k < 0 or k >= nbins - 1:
@@ -434,35 +440,63 @@ def sensor_values(L, lam, pdf, w_d, response, rgb_mode, out, lam_weight):
 spectrum_min_nm = spectrum.SENSOR_MIN_NM
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def start_paths(L, thr, prev_pdf, prev_delta, idx, e_row):
+    """Initial path state: no radiance, unit throughput, a delta 'previous bounce' (the
+    camera), ray i belongs to path i, no cached emission row."""
+    for i in range(len(idx)):
+        for j in range(4):
+            L[i, j] = 0.0
+            thr[i, j] = 1.0
+        prev_pdf[i] = 0.0
+        prev_delta[i] = 1
+        idx[i] = i
+        e_row[i] = -1
+
+
+_TRACE_BUFFERS = (("L", 4, np.float32), ("thr", 4, np.float32), ("prev_pdf", 0, np.float32),
+                  ("prev_delta", 0, np.int32), ("idx", 0, np.int64), ("sh_idx", 0, np.int64),
+                  ("sh_o", 3, np.float32), ("sh_d", 3, np.float32), ("sh_t", 0, np.float32),
+                  ("sh_c", 4, np.float32), ("li", 4, np.int32), ("lf", 4, np.float32),
+                  ("e_row", 0, np.int32), ("e_val", 4, np.float32))
+
+
+def trace_buffers(n: int, keep: dict | None = None) -> dict[str, np.ndarray]:
+    """The wavefront arrays of :func:`trace` for n paths (uninitialised).
+
+    With ``keep`` (a dict owned by the caller, one per concurrent wavefront), arrays are
+    reused from it while they are large enough: fresh multi-MB arrays cost a page fault
+    per 4 KiB on every wavefront.
+    """
+    keep = {} if keep is None else keep
+    if keep.get("cap", -1) < n:
+        keep.clear()
+        keep["cap"] = n
+        for name, cols, dtype in _TRACE_BUFFERS:
+            keep[name] = np.empty((n, cols) if cols else n, dtype)
+    return {name: keep[name][:n] for name, _, _ in _TRACE_BUFFERS}
+
+
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_local: np.ndarray,
-          d: np.ndarray, lamu: np.ndarray, nlanes: int,
-          sky_seen: bool = True) -> tuple[np.ndarray, np.ndarray]:
+          d: np.ndarray, lamu: np.ndarray, nlanes: int, sky_seen: bool = True,
+          buffers: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Trace a wavefront of camera rays; returns (L (N,4) lab radiance, primary hit t).
 
     ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit;
-    both are used as the wavefront's ray buffers and are overwritten.
+    both are used as the wavefront's ray buffers and are overwritten.  ``buffers``: see
+    :func:`trace_buffers` (the returned L lives in them until the next call).
     """
     n = len(keys)
-    L = np.zeros((n, 4), np.float32)
-    thr = np.ones((n, 4), np.float32)
-    prev_pdf = np.zeros(n, np.float32)
-    prev_delta = np.ones(n, np.int32)
-    idx = np.arange(n, dtype=np.int64)
+    b = trace_buffers(n, buffers)
+    L, thr, prev_pdf, prev_delta, idx = b["L"], b["thr"], b["prev_pdf"], b["prev_delta"], b["idx"]
+    li, lf, e_row, e_val = b["li"], b["lf"], b["e_row"], b["e_val"]
+    start_paths(L, thr, prev_pdf, prev_delta, idx, e_row)
     # shade compacts the rays in place: float32 C-contiguous inputs are used (and
     # overwritten) as they are, anything else is converted once
     o = np.ascontiguousarray(o_local, np.float32)
     d = np.ascontiguousarray(d, np.float32)
-    sh_idx = np.empty(n, np.int64)
-    sh_o = np.empty((n, 3), np.float32)
-    sh_d = np.empty((n, 3), np.float32)
-    sh_t = np.empty(n, np.float32)
-    sh_c = np.empty((n, 4), np.float32)
-    columns = sc.emit.shape[1]
-    li = np.empty((n, 4), np.int32)
-    lf = np.empty((n, 4), np.float32)
-    column_split(lamu, columns, li, lf)
-    e_row = np.full(n, -1, np.int32)
-    e_val = np.empty((n, 4), np.float32)
+    sh_idx, sh_o, sh_d, sh_t, sh_c = b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"]
+    column_split(lamu, sc.emit.shape[1], li, lf)
     first_t = None
     m = n
     for depth in range(max_depth):
