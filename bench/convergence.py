@@ -29,6 +29,7 @@ import numpy as np
 
 from relray.bench import common as cm
 from relray.bench.cycles_anchor import CyclesWorker, bpy_available, cycles_bounces, scene_npz
+from relray.core import render
 
 
 @dataclass
@@ -38,7 +39,8 @@ class ConvergenceConfig:
     width: int = 128
     height: int = 128
     spp: list[int] = field(default_factory=lambda: [4, 8, 16, 32, 64, 128, 256])
-    thresholds: list[float] = field(default_factory=lambda: [0.4, 0.2, 0.1, 0.05, 0.025])
+    thresholds: list[float] = field(
+        default_factory=lambda: [0.2, 0.14, 0.1, 0.07, 0.05, 0.035, 0.025])
     repeats: int = 3
     ref_factor: int = 16
     threads: int = 2
@@ -166,10 +168,16 @@ def adaptive_diagnosis(bench: cm.RelrayBench, cfg: ConvergenceConfig,
     with fewer samples than the cap.  A stopping rule that judges a pixel by the same
     samples it averages stops the pixels whose first samples happened to agree (missed
     the rare bright paths): they come out too dark (negative bias) and noisier than the
-    plain render in the same pixels.
+    plain render in the same pixels.  ``Film.converged`` limits this with a first pass of
+    ``render.ADAPTIVE_FIRST_PASS`` samples and a 3x3 window; ``bias_stopped_paired`` is
+    the luminance of the stopped pixels over that of a plain render at the cap with the
+    *same* seed (the same first samples), minus 1: the selection bias alone.
     """
     cap = max(cfg.spp)
     rows = []
+    full = bench.render(spp=cap, width=cfg.width, height=cfg.height, threads=cfg.threads,
+                        seed=0)
+    yf = (full.rgb @ cm.LUMA).ravel()
     for t in cfg.thresholds:
         a = bench.render(spp=cap, width=cfg.width, height=cfg.height, threads=cfg.threads,
                          seed=0, noise_threshold=t)
@@ -185,6 +193,9 @@ def adaptive_diagnosis(bench: cm.RelrayBench, cfg: ConvergenceConfig,
         ra, rp = rel(a.rgb), rel(p.rgb)
         st = spp < cap
         early = spp <= 16
+        first = spp <= render.ADAPTIVE_FIRST_PASS
+        ya = (a.rgb @ cm.LUMA).ravel()
+        paired = float(ya[st].sum() / yf[st].sum() - 1.0) if st.any() else float("nan")
 
         def rms(x, m):
             return float(np.sqrt(np.mean(x[m] ** 2))) if m.any() else float("nan")
@@ -195,6 +206,7 @@ def adaptive_diagnosis(bench: cm.RelrayBench, cfg: ConvergenceConfig,
             "cpu_per_sample_ratio": (a.cpu / a.spp_mean) / (p.cpu / n),
             "rel_mse_adaptive": cm.rel_mse(a.rgb, ref), "rel_mse_plain": cm.rel_mse(p.rgb, ref),
             "stopped_fraction": float(st.mean()), "stopped_by_16spp": float(early.mean()),
+            "stopped_at_first_pass": float(first.mean()), "bias_stopped_paired": paired,
             "bias_stopped": float(ra[st].mean()) if st.any() else float("nan"),
             "bias_stopped_plain": float(rp[st].mean()) if st.any() else float("nan"),
             "rms_stopped": rms(ra, st), "rms_stopped_plain": rms(rp, st),

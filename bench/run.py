@@ -65,8 +65,10 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
              heavy_size=128, heavy_spp=8, heavy_repeat=1, beta_size=48, beta_spp=8,
              beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
              anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
-             conv=convergence.ConvergenceConfig(width=64, height=64, spp=[4, 8, 16, 32],
-                                                thresholds=[0.4, 0.2, 0.1], repeats=2))
+             conv=convergence.ConvergenceConfig(width=64, height=64,
+                                                spp=[4, 8, 16, 32, 64, 128],
+                                                thresholds=[0.1, 0.05], repeats=2,
+                                                ref_factor=8))
 SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repeat=1,
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,

@@ -50,7 +50,8 @@ STAGES: dict[str, list[tuple[Any, str]]] = {
                      (camera_mod.PinholeCamera, "directions_cam"), (render, "lab_rays"),
                      (render.FrameRenderer, "_enter_scene"), (render, "rand_dims")],
     "wavelength offsets": [(render, "progressive_offsets")],
-    "hero inverse CDF": [(spectrum_mod.WavelengthSampler, "hero")],
+    "hero inverse CDF": [(spectrum_mod.WavelengthSampler, "hero"),
+                         (spectrum_mod.WavelengthSampler, "lanes")],
     "λ to grid coordinates": [(spectrum_mod, "grid_coordinates")],
     "sensor_values": [(render, "sensor_values")],
     "film add_samples": [(film_mod.Film, "add_samples")],
@@ -289,7 +290,7 @@ def shade_breakdown(bench: cm.RelrayBench, width: int = 128, height: int = 128,
         last = list(args)
         last[2] = depth + 1
         one = list(args)
-        one[17] = 1
+        one[18] = 1
         rows.append({"depth": depth, "rays": args[3], "full_ns": best(orig, args),
                      "no_nee_ns": best(orig, no_nee), "emission_only_ns": best(orig, last),
                      "one_lane_ns": best(orig, one),
