@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from relray.bench import common as cm
-from relray.bench import convergence, report, skips, throughput
+from relray.bench import convergence, embree_floor, report, skips, throughput
 
 SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "convergence")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
@@ -55,6 +55,7 @@ class Plan:
     anim_frames: int = 24
     anim_separate: int = 24
     anim_spp: int = 16
+    floor_rays: int = 1 << 18
     wait_idle_s: float = 600.0
     probe_s: float = 0.4
     conv: convergence.ConvergenceConfig = field(default_factory=convergence.ConvergenceConfig)
@@ -73,7 +74,7 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
              skip_spp=2, skip_ref_spp=4, skip_repeat=1, anim_frames=0, anim_separate=0,
-             anim_spp=1, wait_idle_s=0.0, probe_s=0.05,
+             anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
              conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
                                                 thresholds=[0.5], repeats=1, ref_factor=2))
 
@@ -121,6 +122,10 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
             rows.append(m)
         cm.write_csv(out / "throughput.csv", rows)
         cm.write_csv(out / "profile.csv", throughput.profile_table(rows[0]))
+        floor = embree_floor.measure(cornell.prep("cie1931").accel, cornell.scene.triangles,
+                                     rays=plan.floor_rays)
+        if floor is not None:
+            cm.write_csv(out / "embree_floor.csv", [floor])
         size = min(plan.tp_size, 128)
         cm.write_csv(out / "shade_breakdown.csv",
                      throughput.shade_breakdown(cornell, size, size,

@@ -10,7 +10,16 @@ import math
 import numpy as np
 import pytest
 
-from relray.bench import common, convergence, cycles_anchor, report, run, skips, throughput
+from relray.bench import (
+    common,
+    convergence,
+    cycles_anchor,
+    embree_floor,
+    report,
+    run,
+    skips,
+    throughput,
+)
 
 
 def test_metrics_and_interpolation():
@@ -54,12 +63,18 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     md = tmp_path / "RESULTS.md"
     run.run(run.SMOKE, out, md, use_cycles=cycles_anchor.bpy_available(), log=lambda *a: None)
     for name in ("throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
-                 "convergence_medians", "equal_error", "adaptive_gain", "shade_breakdown"):
+                 "convergence_medians", "equal_error", "adaptive_gain", "shade_breakdown",
+                 *(("embree_floor",) if embree_floor.library() is not None else ())):
         rows = common.read_csv(out / f"{name}.csv")
         assert rows, name
     tp = common.read_csv(out / "throughput.csv")[0]
     assert tp["paths"] == 16 * 16 * 2 and tp["rays"] >= tp["paths"]
     assert math.isfinite(tp["embree_share"])
+    if embree_floor.library() is not None:   # the Linux wheel's layout
+        fl = common.read_csv(out / "embree_floor.csv")[0]
+        # the C-API scene answers exactly as embreex's: same triangles, same queries
+        assert fl["agree_prim"] == 1.0 and fl["agree_occluded"] == 1.0
+        assert fl["embree_intersect_ns"] > 0 and fl["embreex_intersect_ns"] > 0
     assert (out / "convergence.png").exists() and (out / "profile.png").exists()
     text = md.read_text()
     assert "## Headline" in text and "## 6. Profile" in text
