@@ -48,7 +48,7 @@ The task model
 
 Determinism
 -----------
-Every random number is a hash of (seed, frame, pixel, sample, dimension), never of a
+Every random number is a function of (seed, frame, pixel, sample, dimension), never of a
 worker or a thread, and each pixel sums its samples in sample order whatever the
 tiling. A frame task renders all samples of its frame exactly as the one-process
 renderer does, so an animation frame is bit-identical whichever worker renders it and
