@@ -11,6 +11,13 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 
+def user_cache_dir(environ=os.environ) -> str:
+    """relray's folder in the user's cache: ``%LOCALAPPDATA%``, ``$XDG_CACHE_HOME`` or
+    ``~/.cache``, then ``relray`` (kernels, fitted spectra)."""
+    root = environ.get("LOCALAPPDATA" if os.name == "nt" else "XDG_CACHE_HOME")
+    return os.path.join(root or os.path.join(os.path.expanduser("~"), ".cache"), "relray")
+
+
 def kernel_source_digest(folder) -> str:
     """SHA-1 over the names and bytes of the modules in ``folder`` that define numba
     kernels (those whose source mentions ``njit``), in name order."""
@@ -33,14 +40,9 @@ def kernel_cache_dir(environ=os.environ) -> str:
     modules whose functions the kernel inlined (``sampling``, ``bsdf``, ``spectrum`` ...),
     so a kernel compiled against an older sampler would be reused after an update; the
     folder is therefore keyed by :func:`kernel_source_digest` of this package. ``<base>``
-    is ``NUMBA_CACHE_DIR`` from the environment, else the user's cache folder
-    (``%LOCALAPPDATA%``, ``$XDG_CACHE_HOME`` or ``~/.cache``)/relray/numba.
+    is ``NUMBA_CACHE_DIR`` from the environment, else :func:`user_cache_dir`/numba.
     """
-    base = environ.get("NUMBA_CACHE_DIR")
-    if not base:
-        root = environ.get("LOCALAPPDATA" if os.name == "nt" else "XDG_CACHE_HOME")
-        base = os.path.join(root or os.path.join(os.path.expanduser("~"), ".cache"),
-                            "relray", "numba")
+    base = environ.get("NUMBA_CACHE_DIR") or os.path.join(user_cache_dir(environ), "numba")
     digest = kernel_source_digest(os.path.dirname(os.path.abspath(__file__)))
     return os.path.join(base, "relray-" + digest[:16])
 

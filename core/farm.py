@@ -398,9 +398,9 @@ def child_numba_cache(parent: str | None) -> str:
     """
     if parent:
         return os.path.join(parent, "relray-cli")
-    root = os.environ.get("LOCALAPPDATA" if os.name == "nt" else "XDG_CACHE_HOME")
-    return os.path.join(root or os.path.join(os.path.expanduser("~"), ".cache"), "relray",
-                        "numba-cli")
+    from . import user_cache_dir
+
+    return os.path.join(user_cache_dir(), "numba-cli")
 
 
 # ------------------------------------------------------------------------------ work split

@@ -266,9 +266,10 @@ class CoefficientCache:
     """Fitted coefficients in memory, mirrored to one ``.npz`` file per model tag on disk.
 
     Keys are tuples ``(tag, r, g, b, uv, ir)`` (uv/ir = -1 for no override), values (3,)
-    coefficients.  The file is ``$XDG_CACHE_HOME/relray/<version>-<tag>.npz`` (default
-    ``~/.cache/relray``), disabled by ``RELRAY_DISK_CACHE=0``.  Writes are atomic (temp file,
-    then rename); a missing, broken or unwritable cache only costs a refit, never an error.
+    coefficients.  The file is ``<version>-<tag>.npz`` in ``relray.core.user_cache_dir()``
+    (``$XDG_CACHE_HOME``, ``%LOCALAPPDATA%`` or ``~/.cache``, then ``relray``), disabled by
+    ``RELRAY_DISK_CACHE=0``.  Writes are atomic (temp file, then rename); a missing, broken
+    or unwritable cache only costs a refit, never an error.
     """
 
     def __init__(self, version: str):
@@ -280,8 +281,9 @@ class CoefficientCache:
         """The cache file for a model tag, or None when the disk cache is disabled."""
         if os.environ.get("RELRAY_DISK_CACHE", "1") == "0":
             return None
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        return Path(base) / "relray" / f"{self.version}-{tag}.npz"
+        from . import user_cache_dir
+
+        return Path(user_cache_dir()) / f"{self.version}-{tag}.npz"
 
     def load(self, tag: str) -> None:
         """Merge the file for ``tag`` into memory (once per path)."""
