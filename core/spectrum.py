@@ -383,29 +383,36 @@ class WavelengthSampler:
         return HeroLanes(lam, pdf, lamu, w_d, d_min, d_max)
 
 
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _invert_cdf(cdf, edges, guide, v):
+    """(bin b, fraction t in the bin, λ) of the inverse CDF at v ∈ [0, 1).
+
+    The bin search starts at the guide table's bin for v and walks up (a few steps), so
+    it costs O(1) instead of a binary search.  λ is kept below the bin's upper edge by
+    hi (1 - 2^-52), cheaper than nextafter (ulp(hi) < hi 2^-52 for hi in [360, 830]).
+    """
+    k = cdf.shape[0] - 1
+    g = guide.shape[0]
+    b = guide[min(int(v * g), g - 1)]
+    while b < k - 1 and cdf[b + 1] <= v:
+        b += 1
+    c0 = cdf[b]
+    t = min(max((v - c0) / (cdf[b + 1] - c0), 0.0), 1.0)
+    lo = edges[b]
+    hi = edges[b + 1]
+    return b, t, min(lo + t * (hi - lo), hi * (1.0 - 2.0**-52))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _hero_kernel(cdf, edges, pdf, guide, u, lam_out, pdf_out):
-    """λ_j = inverse-CDF((u + j/n) mod 1) for every u; exact pdf of the bin.
-
-    The bin search starts at the guide table's bin for u and walks up (a few steps), so
-    it costs O(1) instead of a binary search.
-    """
-    k = pdf.shape[0]
+    """λ_j = inverse-CDF((u + j/n) mod 1) for every u (:func:`_invert_cdf`); exact pdf of
+    the bin."""
     n = lam_out.shape[1]
-    g = guide.shape[0]
     for i in range(u.shape[0]):
         for j in range(n):
             v = u[i] + j / n
             v = v - math.floor(v)
-            b = guide[min(int(v * g), g - 1)]
-            while b < k - 1 and cdf[b + 1] <= v:
-                b += 1
-            c0 = cdf[b]
-            t = min(max((v - c0) / (cdf[b + 1] - c0), 0.0), 1.0)
-            lo = edges[b]
-            hi = edges[b + 1]
-            lam_out[i, j] = min(lo + t * (hi - lo), hi * (1.0 - 2.0**-52))  # < hi, cheaper
-            # than nextafter (ulp(hi) < hi 2^-52 for hi in [360, 830])
+            b, t, lam_out[i, j] = _invert_cdf(cdf, edges, guide, v)
             pdf_out[i, j] = pdf[b]
 
 
@@ -413,8 +420,6 @@ def _hero_kernel(cdf, edges, pdf, guide, u, lam_out, pdf_out):
 def _lanes_kernel(cdf, edges, pdf, guide, bin_u, bin_rw, u, D, use_d, shift_d, searchlight,
                   lam_out, pdf_out, lamu_out, w_d):
     """:func:`_hero_kernel` (n = 4) + :func:`_grid_coordinates` + D⁵ + min/max of D."""
-    k = pdf.shape[0]
-    g = guide.shape[0]
     d_min = math.inf
     d_max = 0.0
     shift = 0.0
@@ -443,14 +448,7 @@ def _lanes_kernel(cdf, edges, pdf, guide, bin_u, bin_rw, u, D, use_d, shift_d, s
             v = ui + 0.25 * j  # (u + j/4) mod 1, exactly as _hero_kernel
             if v >= 1.0:
                 v -= 1.0
-            b = guide[min(int(v * g), g - 1)]
-            while b < k - 1 and cdf[b + 1] <= v:
-                b += 1
-            c0 = cdf[b]
-            t = min(max((v - c0) / (cdf[b + 1] - c0), 0.0), 1.0)
-            lo = edges[b]
-            hi = edges[b + 1]
-            lam_out[i, j] = min(lo + t * (hi - lo), hi * (1.0 - 2.0**-52))
+            b, t, lam_out[i, j] = _invert_cdf(cdf, edges, guide, v)
             pdf_out[i, j] = pdf[b]
             # ln λ - ln lo = log1p(x), x = t (hi - lo)/lo ≤ 1/360: the series to x⁴ is off by
             # < x⁵/5 < 4e-14 (the clamp of λ just below hi moves it by ~1e-16)
