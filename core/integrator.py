@@ -461,20 +461,22 @@ _TRACE_BUFFERS = (("L", 4, np.float32), ("thr", 4, np.float32), ("prev_pdf", 0, 
                   ("e_row", 0, np.int32), ("e_val", 4, np.float32))
 
 
-def trace_buffers(n: int, keep: dict | None = None) -> dict[str, np.ndarray]:
-    """The wavefront arrays of :func:`trace` for n paths (uninitialised).
+def wavefront_buffers(n: int, keep: dict | None = None,
+                      specs: tuple = _TRACE_BUFFERS) -> dict[str, np.ndarray]:
+    """Uninitialised arrays for n paths: ``specs`` lists (name, columns or 0, dtype).
 
     With ``keep`` (a dict owned by the caller, one per concurrent wavefront), arrays are
     reused from it while they are large enough: fresh multi-MB arrays cost a page fault
-    per 4 KiB on every wavefront.
+    per 4 KiB on every wavefront.  Other keys of ``keep`` are left alone unless the
+    arrays have to grow, which empties it.
     """
     keep = {} if keep is None else keep
     if keep.get("cap", -1) < n:
         keep.clear()
         keep["cap"] = n
-        for name, cols, dtype in _TRACE_BUFFERS:
+        for name, cols, dtype in specs:
             keep[name] = np.empty((n, cols) if cols else n, dtype)
-    return {name: keep[name][:n] for name, _, _ in _TRACE_BUFFERS}
+    return {name: keep[name][:n] for name, _, _ in specs}
 
 
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_local: np.ndarray,
@@ -484,10 +486,10 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_loc
 
     ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit;
     both are used as the wavefront's ray buffers and are overwritten.  ``buffers``: see
-    :func:`trace_buffers` (the returned L lives in them until the next call).
+    :func:`wavefront_buffers` (the returned L lives in them until the next call).
     """
     n = len(keys)
-    b = trace_buffers(n, buffers)
+    b = wavefront_buffers(n, buffers)
     L, thr, prev_pdf, prev_delta, idx = b["L"], b["thr"], b["prev_pdf"], b["prev_delta"], b["idx"]
     li, lf, e_row, e_val = b["li"], b["lf"], b["e_row"], b["e_val"]
     start_paths(L, thr, prev_pdf, prev_delta, idx, e_row)

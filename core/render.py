@@ -30,7 +30,14 @@ from . import relativity, spectrum
 from .accel import MISS_DISTANCE, Accel
 from .camera import PinholeCamera
 from .film import Film
-from .integrator import KernelScene, kernel_scene, sensor_values, trace, triangle_geometry
+from .integrator import (
+    KernelScene,
+    kernel_scene,
+    sensor_values,
+    trace,
+    triangle_geometry,
+    wavefront_buffers,
+)
 from .job import Job, RenderSettings, beta_at_frame, frame_list
 from .lights import LightTable, build_lights
 from .materials import SpectralTables, build_tables
@@ -38,6 +45,11 @@ from .sampling import path_keys, progressive_offsets
 from .scene import Scene
 
 WAVEFRONT = 1 << 16
+#: The per-chunk arrays of :meth:`FrameRenderer._trace_chunk` (see wavefront_buffers).
+CHUNK_BUFFERS = (("pix", 0, np.int64), ("samp", 0, np.int64), ("sensor", 3, np.float64),
+                 ("alpha", 0, np.float64), ("lam_weight", 4, np.float64),
+                 ("lam", 4, np.float64), ("pdf", 4, np.float64), ("lamu", 4, np.float32),
+                 ("w_d", 0, np.float64))
 ESCAPED_DEPTH = 1e10
 
 
@@ -181,6 +193,7 @@ class FrameRenderer:
         self.doppler = settings.doppler and not self.rgb_mode
         self.searchlight = settings.searchlight and mode == "cie1931"
         self.threads = settings.threads or os.cpu_count() or 1
+        self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
 
     def render(self, event: relativity.ShutterEvent, frame: int,
                progress: Callable[[int], None] | None = None,
@@ -253,41 +266,33 @@ class FrameRenderer:
         n_s = s1 - s0
         n = len(pixels) * n_s
         # Wavefront buffers, kept by the renderer across chunks, threads and frames (one set
-        # per concurrent chunk; list pop/append are atomic): fresh multi-MB arrays would cost
-        # a page fault per 4 KiB every time (~1 µs each on a VM).  A set returns to the pool
+        # per concurrent chunk; list pop/append are atomic).  A set returns to the pool
         # once the film has consumed it.
-        pool = self.__dict__.setdefault("_chunk_buffers", [])
-        buf = pool.pop() if pool else None
-        if buf is None or buf["cap"] < n:
-            cap = max(n, 1)
-            e = np.empty
-            buf = {"cap": cap, "pix": e(cap, np.int64), "samp": e(cap, np.int64),
-                   "sensor": e((cap, 3)), "alpha": e(cap), "lam_weight": e((cap, 4)),
-                   "lanes": (e((cap, 4)), e((cap, 4)), e((cap, 4), np.float32), e(cap))}
-            if self.rgb_mode:  # lam, pdf, lamu, w_d as rgb mode reads them: constants
-                lam, pdf, lamu, w_d = buf["lanes"]
-                lam[:], pdf[:], lamu[:], w_d[:] = 0.0, 1.0, (0.0, 1.0, 2.0, 0.0), 1.0
-        pix, samp = buf["pix"][:n], buf["samp"][:n]
+        keep = self._chunk_buffers.pop() if self._chunk_buffers else {}
+        b = wavefront_buffers(n, keep, CHUNK_BUFFERS)
+        pix, samp = b["pix"], b["samp"]
         pix.reshape(len(pixels), n_s)[:] = pixels[:, None]
         samp.reshape(len(pixels), n_s)[:] = np.arange(s0, s1, dtype=np.int64)
         keys = path_keys(s.seed, frame, pix, samp)
         o_local, d_lab, D, skipped = self.camera.primary_rays(
             event.beta, keys, pix, np.asarray(event.x, np.float64) - prep.accel.origin,
             prep.radius)
+        lanes = (b["lam"], b["pdf"], b["lamu"], b["w_d"])
         if self.rgb_mode:  # columns 0..2 of the RGB tables; w_d = 1 (no searchlight)
-            lam, pdf, lamu, w_d = (a[:n] for a in buf["lanes"])
+            lam, pdf, lamu, w_d = lanes
+            lam[:], pdf[:], lamu[:], w_d[:] = 0.0, 1.0, (0.0, 1.0, 2.0, 0.0), 1.0
             d_min, d_max = (float(D.min()), float(D.max())) if n else (math.inf, 0.0)
             nlanes = 3
         else:
             u = progressive_offsets(s.seed, frame, pix, samp)
             # hero λ, pdf, table coordinates (Doppler-shifted), D⁵ and D's range: one pass
             lam, pdf, lamu, w_d, d_min, d_max = self.sampler.lanes(
-                u, D, doppler=self.doppler, searchlight=self.searchlight, out=buf["lanes"])
+                u, D, doppler=self.doppler, searchlight=self.searchlight, out=lanes)
             nlanes = 4
         L, t_hit = trace(prep.kernel, prep.accel, s.max_depth, keys, o_local, d_lab, lamu,
-                         nlanes, sky_seen=not s.transparent, buffers=buf.setdefault("trace", {}))
-        alpha = np.less(t_hit, MISS_DISTANCE, out=buf["alpha"][:n])  # 1.0 where it hit
-        sensor, lam_weight = buf["sensor"][:n], buf["lam_weight"][:n]
+                         nlanes, sky_seen=not s.transparent, buffers=keep.setdefault("trace", {}))
+        alpha = np.less(t_hit, MISS_DISTANCE, out=b["alpha"])  # 1.0 where it hit
+        sensor, lam_weight = b["sensor"], b["lam_weight"]
         sensor_values(L, lam, pdf, w_d, self.response, self.rgb_mode, sensor, lam_weight,
                       self.bands is not None)
         aov = {"doppler": D}  # the AOV arrays only when the film has them
@@ -301,7 +306,7 @@ class FrameRenderer:
             stats.paths += n
             stats.d_min = min(stats.d_min, d_min)
             stats.d_max = max(stats.d_max, d_max)
-        pool.append(buf)
+        self._chunk_buffers.append(keep)
 
 
 def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent) -> dict[str, str]:
