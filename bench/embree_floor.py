@@ -76,6 +76,16 @@ def _scene(lib: ctypes.CDLL, tris: np.ndarray) -> tuple[int, int]:
     return dev, scene
 
 
+@njit(nogil=True, inline="always")
+def _set_ray(f, u, o, d, i):  # pragma: no cover - compiled
+    """RTCRay of ray i (float and uint32 views of one buffer): origin, tnear 0, direction,
+    time 0, tfar = ∞ (1e30), every mask bit, id and flags 0."""
+    f[0], f[1], f[2], f[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
+    f[4], f[5], f[6], f[7] = d[i, 0], d[i, 1], d[i, 2], 0.0
+    f[_TFAR] = 1e30
+    u[_MASK], u[_MASK + 1], u[_MASK + 2] = 0xFFFFFFFF, 0, 0
+
+
 def _kernels(lib: ctypes.CDLL):
     isect, occl = lib.rtcIntersect1, lib.rtcOccluded1
 
@@ -84,10 +94,7 @@ def _kernels(lib: ctypes.CDLL):
         f = buf.view(np.float32)
         u = buf.view(np.uint32)
         for i in range(len(o)):
-            f[0], f[1], f[2], f[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
-            f[4], f[5], f[6], f[7] = d[i, 0], d[i, 1], d[i, 2], 0.0
-            f[_TFAR] = 1e30
-            u[_MASK], u[_MASK + 1], u[_MASK + 2] = 0xFFFFFFFF, 0, 0
+            _set_ray(f, u, o, d, i)
             u[_PRIM], u[_GEOM] = 0xFFFFFFFF, 0xFFFFFFFF
             isect(scene, buf.ctypes.data, 0)
             tfar[i] = f[_TFAR]
@@ -98,10 +105,7 @@ def _kernels(lib: ctypes.CDLL):
         f = buf.view(np.float32)
         u = buf.view(np.uint32)
         for i in range(len(o)):
-            f[0], f[1], f[2], f[3] = o[i, 0], o[i, 1], o[i, 2], 0.0
-            f[4], f[5], f[6], f[7] = d[i, 0], d[i, 1], d[i, 2], 0.0
-            f[_TFAR] = 1e30
-            u[_MASK], u[_MASK + 1], u[_MASK + 2] = 0xFFFFFFFF, 0, 0
+            _set_ray(f, u, o, d, i)
             occl(scene, buf.ctypes.data, 0)
             out[i] = f[_TFAR] < 0.0   # Embree sets tfar = -inf on a hit
 

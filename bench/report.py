@@ -71,6 +71,18 @@ def plot_converged(refs: dict[str, np.ndarray], path: Path) -> Path | None:
     return path
 
 
+def _series_panel(a, med: list[dict[str, Any]], clock: str, err: str, xlabel: str,
+                  ylabel: str) -> None:
+    """One log-log panel: every series of SERIES_STYLE that has points, error against time."""
+    for series, (colour, style) in SERIES_STYLE.items():
+        t, e = _curve(med, series, clock, err)
+        if t:
+            a.loglog(t, e, style, color=colour, label=series, ms=4)
+    a.set_xlabel(xlabel)
+    a.set_ylabel(ylabel)
+    a.grid(True, which="both", lw=0.3)
+
+
 def plot_convergence(med: list[dict[str, Any]], eq: list[dict[str, Any]], path: Path) -> Path:
     """Error against time, log-log: (relative MSE, ΔE00) × (wall, CPU)."""
     plt = _plt()
@@ -79,15 +91,9 @@ def plot_convergence(med: list[dict[str, Any]], eq: list[dict[str, Any]], path: 
         for j, (clock, clabel) in enumerate((("wall_s", "wall time (s)"),
                                               ("cpu_s", "CPU time (s)"))):
             a = ax[i, j]
-            for series, (colour, style) in SERIES_STYLE.items():
-                t, e = _curve(med, series, clock, err)
-                if t:
-                    a.loglog(t, e, style, color=colour, label=series, ms=4)
+            _series_panel(a, med, clock, err, clabel, elabel)
             for lvl in sorted({r["level"] for r in eq if r["metric"] == err}):
                 a.axhline(lvl, color="grey", lw=0.6, ls=":")
-            a.set_xlabel(clabel)
-            a.set_ylabel(elabel)
-            a.grid(True, which="both", lw=0.3)
     ax[0, 0].legend()
     fig.suptitle("Cornell box, β = 0: error against time (medians; dotted: equal-error levels)")
     fig.tight_layout()
@@ -102,18 +108,10 @@ def plot_adaptive(med: list[dict[str, Any]], path: Path) -> Path:
     fig, ax = plt.subplots(1, 2, figsize=(10, 4.2))
     for a, (err, elabel) in zip(ax, (("rel_mse", "relative MSE"), ("de00", "mean ΔE00")),
                                 strict=True):
-        for series, (colour, style) in SERIES_STYLE.items():
-            t, e = _curve(med, series, "cpu_s", err)
-            if not t:
-                continue
-            a.loglog(t, e, style, color=colour, label=series, ms=4)
-            if series == "relray adaptive":
-                for r in (r for r in med if r["series"] == series):
-                    a.annotate(f"t={r['x']:g}", (r["cpu_s"], r[err]), fontsize=7,
-                               xytext=(3, 3), textcoords="offset points")
-        a.set_xlabel("CPU time (s)")
-        a.set_ylabel(elabel)
-        a.grid(True, which="both", lw=0.3)
+        _series_panel(a, med, "cpu_s", err, "CPU time (s)", elabel)
+        for r in (r for r in med if r["series"] == "relray adaptive"):
+            a.annotate(f"t={r['x']:g}", (r["cpu_s"], r[err]), fontsize=7,
+                       xytext=(3, 3), textcoords="offset points")
     ax[0].legend()
     fig.suptitle("Adaptive sampling: noise_threshold t at a fixed spp cap vs plain spp")
     fig.tight_layout()
