@@ -116,8 +116,10 @@ def test_png_srgb_codes(tmp_path):
     np.testing.assert_array_equal(codes[1, :, 1], expect)
     np.testing.assert_array_equal(codes[0, :, 2], [0, 18, 162, 255, 255, 0, 0])  # 2x brighter
     # The same curve as colour-science's sRGB encoding.
+    # (within rounding to the nearest code: colour-science's float64 curve may differ from
+    # ours in the last bits, which would flip a code only at an exact half)
     ref = colour.cctf_encoding(np.clip(np.nan_to_num(lin), 0, 1), function="sRGB")
-    np.testing.assert_array_equal(codes[1, :, 0], np.floor(ref * 255 + 0.5).astype(np.uint8))
+    assert np.all(np.abs(codes[1, :, 0] - ref * 255) <= 0.5 + 1e-9)
 
 
 def test_png_alpha_is_straight(tmp_path):
