@@ -35,10 +35,12 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from relray.core import job as jobmod
-from relray.core import relativity, render
-from relray.core.camera import PinholeCamera
-from relray.core.scene import Scene, build_scene
+from relray.core.physics import relativity
+from relray.core.render import frames as render
+from relray.core.render.camera import PinholeCamera
+from relray.core.scene import job as jobmod
+from relray.core.scene import motion
+from relray.core.scene.geometry import Scene, build_scene
 
 REPO = Path(__file__).resolve().parents[1]
 CORNELL = REPO / "presets" / "cornell.toml"
@@ -269,15 +271,15 @@ class RelrayBench:
     def renderer(self, **overrides: Any) -> render.FrameRenderer:
         """A FrameRenderer with overridden settings (no AOVs, no spectral bands)."""
         s = self.settings(**overrides)
-        cam = PinholeCamera.from_settings(render.resolve_camera(self.job, self.scene),
+        cam = PinholeCamera.from_settings(motion.resolve_camera(self.job, self.scene),
                                           s.width, s.height)
         return render.FrameRenderer(self.prep(s.spectral), s, cam)
 
     def event(self, beta: Sequence[float] | None = None) -> relativity.ShutterEvent:
         """The shutter event of frame 1, or a snapshot at ct = 0 moving with ``beta``."""
         if beta is None:
-            return render.frame_events(self.job)[0][1]
-        cam = render.resolve_camera(self.job, self.scene)
+            return motion.frame_events(self.job)[0][1]
+        cam = motion.resolve_camera(self.job, self.scene)
         return relativity.snapshot_event(np.asarray(cam.position, np.float64),
                                          np.asarray(beta, np.float64), 0.0)
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from relray.bench import common as cm
 from relray.bench.cycles_anchor import CyclesWorker, bpy_available, cycles_bounces, scene_npz
-from relray.core import render
+from relray.core.render import frames as render
 
 
 @dataclass

@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from relray.core import render
-from relray.core.job import Job
-from relray.core.scene import Scene
+from relray.core.scene import motion
+from relray.core.scene.description import Job
+from relray.core.scene.geometry import Scene
 
 WORKER = Path(__file__).with_name("cycles_worker.py")
 MARK = "@@CYCLES@@"
@@ -57,7 +57,7 @@ def scene_npz(job: Job, scene: Scene, width: int, height: int, path: Path) -> Pa
                      "one_sided": bool(m.one_sided_emission)})
     if scene.lights or np.any(scene.background):
         raise ValueError("analytic lights and a sky are not exported to Cycles")
-    cam = render.resolve_camera(job, scene)
+    cam = motion.resolve_camera(job, scene)
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, triangles=np.asarray(scene.triangles, np.float64),
              material_ids=np.asarray(scene.material_ids, np.int32),

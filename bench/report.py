@@ -635,7 +635,7 @@ def _section_adaptive(add, d, plots, md) -> None:
                        ("RMS capped: adaptive", "rms_capped", ".3f"),
                        ("plain", "rms_capped_plain", ".3f")]))
         add("\n(stopped in % of the pixels.)\n")
-    add("\n**Reading.** `core/render.py` gives every pixel a first pass of "
+    add("\n**Reading.** `core/render/frames.py` gives every pixel a first pass of "
         "`ADAPTIVE_FIRST_PASS` = 64 samples, then passes that double the count (aligned "
         "power-of-two blocks of the Owen-scrambled Sobol sequence, so a stopped pixel keeps "
         "a well-stratified prefix). After each pass `Film.converged` stops a pixel when "
@@ -660,7 +660,7 @@ SKIP_NOTES = {
         "integration). Switching to the `rgb` path would change the picture (RGB "
         "multiplies channels per bounce: about 1–3 ΔE00 in indirect light, see §2), so it "
         "is a model choice, not a pure skip; the measured gain is in the B / A column. "
-        "Where it would go: `core/render.py` `build_renderer`/`FrameRenderer.__init__` "
+        "Where it would go: `core/render/frames.py` `build_renderer`/`FrameRenderer.__init__` "
         "(`mode = \"rgb\"` when `not settings.doppler` and the user asked for it, e.g. "
         "`spectral = \"auto\"`)."),
     "β = 0 path (no boost)": (
@@ -786,7 +786,7 @@ def _section_recommendations(add, d) -> None:
     budget = 1e9 / GOAL_PATHS
     add("Done since the previous dated run (each measured in the session that made it; "
         "the tables above are the combined result):\n")
-    add("- **Sampler** (`core/sampling.py`): pixel positions, light samples and BSDF "
+    add("- **Sampler** (`core/render/sampling.py`): pixel positions, light samples and BSDF "
         "directions are padded Owen-scrambled Sobol pairs (Burley 2020) instead of "
         "independent hashes, and the light pick reuses the light sample's stratified "
         "coordinate. Relative MSE per sample on the Cornell box fell by 29–43 % (16–256 "

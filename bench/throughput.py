@@ -29,13 +29,13 @@ from typing import Any
 import numpy as np
 
 from relray.bench import common as cm
-from relray.core import accel as accel_mod
-from relray.core import camera as camera_mod
-from relray.core import film as film_mod
-from relray.core import integrator as integrator_mod
-from relray.core import job as jobmod
-from relray.core import render
-from relray.core import spectrum as spectrum_mod
+from relray.core.physics import spectrum as spectrum_mod
+from relray.core.render import accel as accel_mod
+from relray.core.render import camera as camera_mod
+from relray.core.render import film as film_mod
+from relray.core.render import frames as render
+from relray.core.render import integrator as integrator_mod
+from relray.core.scene import job as jobmod
 
 # Stage -> the functions timed for it: (module or class, attribute name).  Names that a
 # future version of the core no longer has are skipped (and listed as missing).

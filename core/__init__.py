@@ -1,11 +1,26 @@
 """The standalone render core: numpy, embreex and numba, never bpy.
 
+Packages follow the data flow, and each imports only those before it (the layering that
+``tests/test_layout.py`` enforces, with no import cycle anywhere)::
+
+    errors                     UserError: one line naming the key and the file
+    physics/    relativity, spectrum, sigmoid, cie_tables
+    scene/      description ◄── job (TOML), gltf, shapes;  geometry, motion
+    render/     camera, accel, sampling, bsdf, lights, materials, integrator, film, frames
+    output/     imageio, frame_files (names, metadata, resume), contact
+    progress    tqdm bar, JSON lines (the subprocess contract)
+    runner      a job's frames in this process
+    farm        a job's frames on Dask
+    cli         the ``relray`` command
+
 The core runs its own worker threads (one per core), so BLAS thread pools would only
 oversubscribe the machine: unless the environment says otherwise, BLAS and OpenMP are
 pinned to one thread here, before numpy is first imported.
 """
 
+import hashlib
 import os
+from pathlib import Path
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
@@ -19,16 +34,15 @@ def user_cache_dir(environ=os.environ) -> str:
 
 
 def kernel_source_digest(folder) -> str:
-    """SHA-1 over the names and bytes of the modules in ``folder`` that define numba
-    kernels (those whose source mentions ``njit``), in name order."""
-    import hashlib
-    from pathlib import Path
-
+    """SHA-1 over the paths (relative to ``folder``) and bytes of the modules under
+    ``folder`` that define numba kernels (those whose source mentions ``njit``), in path
+    order."""
     digest = hashlib.sha1()
-    for path in sorted(Path(folder).glob("*.py")):
+    root = Path(folder)
+    for path in sorted(root.rglob("*.py")):
         source = path.read_bytes()
         if b"njit" in source:
-            digest.update(path.name.encode())
+            digest.update(path.relative_to(root).as_posix().encode())
             digest.update(source)
     return digest.hexdigest()
 

@@ -25,7 +25,16 @@ from typing import NoReturn
 
 import numpy as np
 
+from . import farm
 from .errors import UserError
+from .output.contact import write_contact_sheet
+from .physics import relativity
+from .progress import JsonReporter, TqdmReporter, default_reporter
+from .render.camera import PinholeCamera, lab_rays
+from .render.frames import RenderCancelled
+from .runner import render_job
+from .scene import job as jobmod
+from .scene.motion import camera_settings, frame_events
 
 EXIT_FRAMES_FAILED = 1
 EXIT_USER_ERROR = 2
@@ -97,8 +106,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def load_with_overrides(args: argparse.Namespace):
-    from . import job as jobmod
-
     job = jobmod.load_job(args.job)
     return jobmod.with_overrides(
         job,
@@ -149,10 +156,7 @@ def interrupts(cancel: threading.Event) -> Iterator[None]:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from . import farm
-    from .render import RenderCancelled, render_job
-
-    reporter = farm.default_reporter(not args.quiet, args.json_progress)
+    reporter = default_reporter(not args.quiet, args.json_progress)
     cancel = threading.Event()
     failed: dict[int, str] = {}
     try:
@@ -169,14 +173,14 @@ def cmd_render(args: argparse.Namespace) -> int:
                 written = render_job(job, overwrite=args.overwrite, reporter=reporter,
                                      cancel=cancel.is_set)
     except UserError as e:
-        if isinstance(reporter, farm.JsonReporter):
+        if isinstance(reporter, JsonReporter):
             reporter.error(None, str(e), kind="user")
         reporter.finish("error", exit_code=EXIT_USER_ERROR)
         raise
     except (KeyboardInterrupt, RenderCancelled):
         reporter.finish("cancelled", exit_code=EXIT_INTERRUPTED)
         raise KeyboardInterrupt from None
-    if not isinstance(reporter, farm.TqdmReporter):  # the bar printed them as they came
+    if not isinstance(reporter, TqdmReporter):  # the bar printed them as they came
         for frame, message in sorted(failed.items()):
             print(f"relray: error: frame {frame} failed: {message}", file=sys.stderr)
     if failed:
@@ -191,11 +195,6 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    from . import job as jobmod
-    from . import relativity
-    from .camera import PinholeCamera, lab_rays
-    from .render import camera_settings, frame_events
-
     job = load_with_overrides(args)
     print(jobmod.job_summary(job))
     cam = camera_settings(job)
@@ -215,8 +214,6 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_contact_sheet(args: argparse.Namespace) -> int:
-    from .contact import write_contact_sheet
-
     frames = sorted(p for p in args.folder.glob("*.png") if not p.name.startswith("."))
     if not frames:
         raise UserError("no PNG frames found", key="folder", file=args.folder)

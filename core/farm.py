@@ -4,7 +4,7 @@ What it does
 ------------
 ``relray render JOB`` renders in this process by default: frames one after another,
 every core on the frame in flight through the renderer's own threads
-(:func:`.render.render_job`). Measured on the 2-core development machine this is at least
+(:func:`.runner.render_job`). Measured on the 2-core development machine this is at least
 as fast as a LocalCluster of process workers (README, "Rendering on a farm"), and it needs
 no set-up, no ports and no second copy of the scene in memory. The same command then
 scales out:
@@ -15,7 +15,7 @@ scales out:
 - ``--workers N``: the same on a LocalCluster of N process workers bound to 127.0.0.1
   (fault isolation, and what the fault-tolerance tests use).
 
-In every mode a rerun resumes: :func:`.render.plan_frames` skips the frames whose EXR
+In every mode a rerun resumes: :func:`.output.frame_files.plan_frames` skips the frames whose EXR
 is complete and matches the job (spp, β, ct, spectral mode, seed), removes stale
 temporary files and reports "N done, M to render"; ``--overwrite`` renders them again.
 
@@ -61,30 +61,12 @@ lies that close to a float32 rounding boundary (none of the test images' values 
 
 Progress and the subprocess contract (for the Blender add-on and farm managers)
 -------------------------------------------------------------------------------
-``relray render JOB --json-progress`` prints one JSON object per line on stdout,
-flushed, and nothing else there (:class:`JsonReporter`); stderr carries human-readable
-warnings only. Every object has ``"event"``:
-
-============  ==========================================================================
-event         fields
-============  ==========================================================================
-start         version, job, out, mode ("local" | "dask"), scheduler, workers,
-              frames [first, last], done, to_render, todo [frames], unit, units
-progress      fraction (0..1), frames_done, frames_total, elapsed, eta_seconds (or null)
-frame_done    frame, path (the EXR, else the first file), paths, seconds, fraction,
-              frames_done, frames_total
-error         frame (null when not about one frame), message, kind ("frame" | "user")
-finish        status ("ok" | "failed" | "cancelled" | "error"), exit_code, rendered,
-              failed [frames], seconds
-============  ==========================================================================
-
-Exit codes: 0 every frame done; 1 some frames failed (each named in an ``error``
-event and on stderr); 2 a user error (one line on stderr naming the key and the file,
-nothing written); 130 cancelled. To cancel, send SIGINT or SIGTERM (Windows:
+``relray render JOB --json-progress`` prints JSON lines (:mod:`.progress` documents the
+events and the exit codes). To cancel, send SIGINT or SIGTERM (Windows:
 ``CTRL_BREAK_EVENT`` to a process started with ``CREATE_NEW_PROCESS_GROUP``, or
 terminate it): the frame in flight is abandoned, finished frames stay, and the next run
 resumes. :func:`render_command` builds the argument list, :func:`subprocess_env` the
-environment and :func:`parse_event` reads a line back.
+environment and :func:`.progress.parse_event` reads a line back.
 
 Test hooks (read by this module on the worker, for the fault-tolerance tests only)
 ----------------------------------------------------------------------------------
@@ -97,7 +79,6 @@ up to :data:`PAUSE_SECONDS`, so a test can kill it mid-frame.
 from __future__ import annotations
 
 import contextlib
-import json
 import logging
 import math
 import os
@@ -109,22 +90,20 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
-from .. import __version__
+from . import user_cache_dir
 from .errors import UserError
-from .film import Film
-from .job import Job
-from .relativity import ShutterEvent
-from .render import (
-    FramePlan,
-    FrameRenderer,
-    build_renderer,
-    frame_is_done,
-    plan_frames,
-    resolve_camera,
-    write_film,
-)
+from .output.frame_files import frame_is_done, plan_frames, write_film
+from .output.imageio import frame_paths
+from .physics.relativity import ShutterEvent
+from .physics.spectrum import sensor_to_rgb
+from .progress import Reporter
+from .render.film import Film
+from .render.frames import FrameRenderer, build_renderer
+from .scene.description import Job
+from .scene.geometry import build_scene
+from .scene.motion import resolve_camera
 
 DEFAULT_SCHEDULER_PORT = 8786
 DEFAULT_CONNECT_TIMEOUT = 10.0
@@ -136,206 +115,22 @@ TASK_RETRIES = 1
 PAUSE_SECONDS = 60.0
 TEST_CRASH_ENV = "RELRAY_TEST_CRASH_FRAME"
 TEST_PAUSE_ENV = "RELRAY_TEST_PAUSE_FRAME"
-PROGRESS_INTERVAL_S = 0.5
-"""Least time between two JSON ``progress`` events of the local renderer."""
 
 LOOPBACK_NO_DASHBOARD: dict[str, Any] = {"dashboard_address": "127.0.0.1:0",
                                          "scheduler_kwargs": {"dashboard": False}}
 """LocalCluster options: the scheduler's HTTP endpoint on a free loopback port, no dashboard."""
 
 
-# ------------------------------------------------------------------------------ reporters
-class Reporter:
-    """Hears a run's events; this base class stays silent (``--quiet``).
-
-    Sub-classes print a tqdm bar (:class:`TqdmReporter`) or JSON lines
-    (:class:`JsonReporter`). ``advance`` may be called from render threads.
-    """
-
-    def __init__(self) -> None:
-        self.lock = threading.Lock()
-        self.t0 = time.perf_counter()
-        self.units = 0
-        self.units_done = 0
-        self.frames_total = 0
-        self.frames_done = 0
-        self.rendered: list[int] = []
-        self.failed: list[int] = []
-        self.finished = False
-
-    def start(self, job: Job, plan: FramePlan, mode: str, units: int, unit: str,
-              scheduler: str | None = None, workers: int | None = None) -> None:
-        self.t0 = time.perf_counter()
-        self.units, self.units_done = int(units), 0
-        self.frames_total = len(plan.todo)
-        self._started(job, plan, mode, unit, scheduler, workers)
-
-    def advance(self, n: int) -> None:
-        with self.lock:
-            self.units_done += int(n)
-            self._advanced(int(n))
-
-    def frame_done(self, frame: int, paths: Sequence[Path | str], seconds: float,
-                   d_range: tuple[float, float] | None = None) -> None:
-        with self.lock:
-            self.frames_done += 1
-            self.rendered.append(frame)
-            self._frame_done(frame, [str(p) for p in paths], seconds, d_range)
-
-    def error(self, frame: int | None, message: str, kind: str = "frame") -> None:
-        with self.lock:
-            if frame is not None:
-                self.failed.append(frame)
-            self._error(frame, message, kind)
-
-    def finish(self, status: str, seconds: float | None = None, exit_code: int = 0) -> None:
-        if self.finished:
-            return
-        self.finished = True
-        took = time.perf_counter() - self.t0 if seconds is None else seconds
-        self._finished(status, took, exit_code)
-
-    @property
-    def fraction(self) -> float:
-        return min(1.0, self.units_done / self.units) if self.units else 1.0
-
-    def eta_seconds(self) -> float | None:
-        f = self.fraction
-        if f <= 0.0 or f >= 1.0:
-            return None if f <= 0.0 else 0.0
-        return (time.perf_counter() - self.t0) * (1.0 - f) / f
-
-    # hooks for sub-classes
-    def _started(self, job, plan, mode, unit, scheduler, workers) -> None:
-        pass
-
-    def _advanced(self, n: int) -> None:
-        pass
-
-    def _frame_done(self, frame, paths, seconds, d_range) -> None:
-        pass
-
-    def _error(self, frame, message, kind) -> None:
-        pass
-
-    def _finished(self, status, seconds, exit_code) -> None:
-        pass
 
 
-def plan_message(plan: FramePlan, out_dir: Path) -> str:
-    """'relray: N done, M to render -> DIR'."""
-    return f"relray: {plan.done} done, {len(plan.todo)} to render -> {out_dir}"
 
 
-class TqdmReporter(Reporter):
-    """"N done, M to render" on stdout, then a tqdm bar (paths locally, frames on Dask)."""
-
-    def __init__(self, stream: TextIO | None = None) -> None:
-        super().__init__()
-        self.stream = stream
-        self.bar = None
-
-    def _started(self, job, plan, mode, unit, scheduler, workers) -> None:
-        from tqdm import tqdm
-
-        where = "" if mode == "local" else f" on {scheduler or f'{workers} local workers'}"
-        print(plan_message(plan, job.output.dir) + where, flush=True)
-        if plan.todo:
-            self.bar = tqdm(total=self.units, unit=unit, unit_scale=unit == "path",
-                            desc="render", dynamic_ncols=True, file=self.stream)
-
-    def _advanced(self, n: int) -> None:
-        if self.bar is not None:
-            self.bar.update(n)
-
-    def _frame_done(self, frame, paths, seconds, d_range) -> None:
-        if self.bar is not None:
-            d = f" D {d_range[0]:.3g}..{d_range[1]:.3g}" if d_range else ""
-            self.bar.set_postfix_str(f"frame {frame}{d}")
-
-    def _error(self, frame, message, kind) -> None:
-        from tqdm import tqdm
-
-        what = f"frame {frame} failed: " if frame is not None else ""
-        tqdm.write(f"relray: error: {what}{message}", file=sys.stderr)
-
-    def _finished(self, status, seconds, exit_code) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
 
 
-class JsonReporter(Reporter):
-    """One JSON object per line on ``stream`` (stdout): the subprocess contract."""
-
-    def __init__(self, stream: TextIO | None = None,
-                 interval: float = PROGRESS_INTERVAL_S) -> None:
-        super().__init__()
-        self.stream = stream if stream is not None else sys.stdout
-        self.interval = interval
-        self.last_emit = 0.0
-        self.mode, self.unit = "local", "path"
-
-    def emit(self, event: str, **fields: Any) -> None:
-        line = json.dumps({"event": event, **fields}, allow_nan=False, default=str)
-        self.stream.write(line + "\n")
-        self.stream.flush()
-
-    def _progress(self) -> None:
-        self.last_emit = time.perf_counter()
-        eta = self.eta_seconds()
-        self.emit("progress", fraction=round(self.fraction, 6), frames_done=self.frames_done,
-                  frames_total=self.frames_total,
-                  elapsed=round(time.perf_counter() - self.t0, 3),
-                  eta_seconds=None if eta is None else round(eta, 3))
-
-    def _started(self, job, plan, mode, unit, scheduler, workers) -> None:
-        self.mode, self.unit = mode, unit
-        first, last = plan.frames[0], plan.frames[-1]
-        self.emit("start", version=__version__, job=str(job.path), out=str(job.output.dir),
-                  mode=mode, scheduler=scheduler, workers=workers, frames=[first, last],
-                  done=plan.done, to_render=len(plan.todo), todo=[f for f, _ in plan.todo],
-                  unit=unit, units=self.units, message=plan_message(plan, job.output.dir))
-
-    def _advanced(self, n: int) -> None:
-        # paths (local): at most every `interval`; batches: each; frames: after frame_done
-        if self.unit == "batch" or (self.unit == "path" and
-                                    time.perf_counter() - self.last_emit >= self.interval):
-            self._progress()
-
-    def _frame_done(self, frame, paths, seconds, d_range) -> None:
-        main = next((p for p in paths if p.endswith(".exr") and not p.endswith(".spectral.exr")),
-                    paths[0] if paths else None)
-        self.emit("frame_done", frame=frame, path=main, paths=paths, seconds=round(seconds, 4),
-                  fraction=round(self.fraction, 6), frames_done=self.frames_done,
-                  frames_total=self.frames_total)
-        if self.unit != "batch":
-            self._progress()
-
-    def _error(self, frame, message, kind) -> None:
-        self.emit("error", frame=frame, message=message, kind=kind)
-        if frame is not None and self.unit == "frame":
-            self._progress()
-
-    def _finished(self, status, seconds, exit_code) -> None:
-        self.emit("finish", status=status, exit_code=exit_code, rendered=sorted(self.rendered),
-                  failed=sorted(self.failed), seconds=round(seconds, 3))
 
 
-def default_reporter(show_progress: bool = True, json_progress: bool = False) -> Reporter:
-    """The reporter of the CLI's flags: JSON lines, a tqdm bar, or silence."""
-    if json_progress:
-        return JsonReporter()
-    return TqdmReporter() if show_progress else Reporter()
 
 
-def parse_event(line: str) -> dict[str, Any] | None:
-    """One ``--json-progress`` line -> its event dict (None for anything else)."""
-    try:
-        obj = json.loads(line)
-    except (ValueError, TypeError):
-        return None
-    return obj if isinstance(obj, dict) and "event" in obj else None
 
 
 # ------------------------------------------------------------------------------ subprocess contract
@@ -398,8 +193,6 @@ def child_numba_cache(parent: str | None) -> str:
     """
     if parent:
         return os.path.join(parent, "relray-cli")
-    from . import user_cache_dir
-
     return os.path.join(user_cache_dir(), "numba-cli")
 
 
@@ -499,8 +292,6 @@ def _test_hook(frame: int, total: int) -> Callable[[int], None] | None:
 
 
 def _frame_files(job: Job, frame: int) -> list[str]:
-    from .imageio import frame_paths
-
     paths = frame_paths(job.output.dir, job.output.name.format(frame=frame))
     return [str(paths[f]) for f in job.output.formats]
 
@@ -620,8 +411,6 @@ def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
     ``threads`` is each task's render threads (0: the worker decides, see
     :func:`task_threads`). Frames fail alone: see :class:`FarmResult`.
     """
-    from .scene import build_scene
-
     reporter = reporter if reporter is not None else Reporter()
     resolve_camera(job, build_scene(job))  # user errors here, before any task
     plan = plan_frames(job, overwrite)
@@ -680,8 +469,6 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
                   ranges: list[tuple[int, int]], run_id: str, threads: int,
                   reporter: Reporter, result: FarmResult) -> None:
     from distributed import as_completed
-
-    from .spectrum import sensor_to_rgb
 
     slots = host_slots(client)
     frame, ev = todo
@@ -758,8 +545,7 @@ def with_render_threads(job: Job, threads: int) -> Job:
 
 
 __all__ = [
-    "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "JsonReporter", "Reporter",
-    "TqdmReporter", "available_cores", "dask_client", "default_reporter", "parse_event",
+    "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "available_cores", "dask_client",
     "render", "render_batch_task", "render_command", "render_frame_task", "render_on_dask",
     "host_slots", "sample_batches", "scheduler_address", "subprocess_env", "task_threads",
     "with_render_threads", "worker_renderer",

@@ -16,9 +16,9 @@ import dataclasses
 import re
 from pathlib import Path
 
-from relray.core import job as jobmod
-from relray.core.contact import write_contact_sheet
-from relray.core.render import render_job
+from relray.core.output.contact import write_contact_sheet
+from relray.core.runner import render_job
+from relray.core.scene import job as jobmod
 
 ROOT = Path(__file__).resolve().parents[1]
 

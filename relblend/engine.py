@@ -193,9 +193,9 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         return dict(history), clock
 
     def _render_frame(self, depsgraph, setup: FrameSetup) -> None:
-        from ..core import render as core_render
-        from ..core.camera import PinholeCamera
-        from ..core.job import RenderSettings
+        from ..core.render import frames as core_render
+        from ..core.render.camera import PinholeCamera
+        from ..core.scene.description import RenderSettings
         from .motion import view_doppler_range
 
         scene = depsgraph.scene
@@ -238,7 +238,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
 
     def _run_cancellable(self, renderer, setup: FrameSetup, total: int, head: str):
         """Render in a worker thread; poll test_break and show progress from this one."""
-        from ..core.render import RenderCancelled
+        from ..core.render.frames import RenderCancelled
 
         done = [0]
         lock = threading.Lock()
@@ -347,7 +347,7 @@ def scene_hash(scene, mode: str) -> str:
 
 def prepared_scene(scene, mode: str):
     """core.render.prepare, reused while the exported scene is unchanged."""
-    from ..core import render as core_render
+    from ..core.render import frames as core_render
 
     key = scene_hash(scene, mode)
     if _PREPARED and _PREPARED[0][0] == key:

@@ -2,9 +2,9 @@
 
 Nothing of bpy leaks into the core: meshes leave as float64 arrays (through
 ``foreach_get`` into preallocated buffers), materials as
-:class:`relray.core.job.MaterialSpec`, lights as :class:`relray.core.job.LightSpec`,
-the camera as :class:`relray.core.job.CameraSettings`, and the whole scene as a
-:class:`relray.core.scene.Scene`. Materials and lights are read into job tables and
+:class:`relray.core.scene.job.MaterialSpec`, lights as :class:`relray.core.scene.job.LightSpec`,
+the camera as :class:`relray.core.scene.job.CameraSettings`, and the whole scene as a
+:class:`relray.core.scene.geometry.Scene`. Materials and lights are read into job tables and
 validated by the core (``core.job.material_from_dict``, ``light_from_dict``; values
 beyond a job's ranges are clamped with a warning), and the scene is assembled by
 ``core.scene.scene_from_parts`` (area lights to quads, degenerate triangles dropped,
@@ -59,10 +59,10 @@ from typing import Any
 
 import numpy as np
 
-from ..core import job as core_job
-from ..core import spectrum
 from ..core.errors import UserError
-from ..core.scene import Scene, scene_from_parts
+from ..core.physics import spectrum
+from ..core.scene import job as core_job
+from ..core.scene.geometry import Scene, scene_from_parts
 
 #: Object types that ``to_mesh`` turns into triangles.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}

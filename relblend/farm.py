@@ -367,7 +367,7 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
     """Write scene.glb, meshes/*.ply and the job TOML into ``directory``."""
     import bpy
 
-    from ..core.job import parse_job
+    from ..core.scene.job import parse_job
 
     scene = context.scene
     out = Path(directory).expanduser().resolve()

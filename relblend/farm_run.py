@@ -54,7 +54,7 @@ FINAL_STATES = ("done", "failed", "error", "cancelled")
 
 
 def _parse_event(line: str) -> dict[str, Any] | None:
-    from ..core.farm import parse_event
+    from ..core.progress import parse_event
 
     return parse_event(line)
 

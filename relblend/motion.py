@@ -28,9 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import relativity
-from ..core.camera import PinholeCamera
-from ..core.job import CameraSettings
+from ..core.physics import relativity
+from ..core.render.camera import PinholeCamera
+from ..core.scene.description import CameraSettings
 
 
 class MotionError(ValueError):

@@ -27,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core import relativity
-from ..core.job import MotionSettings, load_motion
+from ..core.physics import relativity
+from ..core.scene.description import MotionSettings
+from ..core.scene.job import load_motion
 
 #: Where the profiles live (inside the extension: the repository's presets/motion).
 MOTION_DIR = Path(__file__).resolve().parent.parent / "presets" / "motion"

@@ -5,8 +5,8 @@ prepare -> FrameRenderer.render -> Film.resolve), but returns the resolved image
 everything a test needs to interpret it (camera, shutter event, sensor matrix).
 
 The pixel-direction and Doppler formulas here are written out from physics.md by hand,
-independently of core/camera.py and core/relativity.py, so tests can compare the renderer
-against them.
+independently of core/render/camera.py and core/physics/relativity.py, so tests can
+compare the renderer against them.
 """
 
 from __future__ import annotations
@@ -19,11 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from relray.core import relativity
-from relray.core.camera import PinholeCamera
-from relray.core.film import FilmImage
-from relray.core.job import Job, parse_job
-from relray.core.render import build_renderer, frame_events
+from relray.core.physics import relativity
+from relray.core.render.camera import PinholeCamera
+from relray.core.render.film import FilmImage
+from relray.core.render.frames import build_renderer
+from relray.core.scene.description import Job
+from relray.core.scene.job import parse_job
+from relray.core.scene.motion import frame_events
 
 
 @dataclass

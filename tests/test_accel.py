@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from relray.core.accel import MISS_DISTANCE, Accel
+from relray.core.render.accel import MISS_DISTANCE, Accel
 
 QUAD = np.array([[[-1, -1, 0], [1, -1, 0], [1, 1, 0]], [[-1, -1, 0], [1, 1, 0], [-1, 1, 0]]],
                 np.float32)

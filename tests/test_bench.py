@@ -47,7 +47,8 @@ def test_toml_writer_round_trips_the_presets():
 
 
 def test_stage_meter_restores_the_core():
-    from relray.core import accel, integrator, render
+    from relray.core.render import accel, integrator
+    from relray.core.render import frames as render
 
     before = (render.trace, integrator.shade, accel.Accel.intersect)
     b = common.RelrayBench(common.make_job(common.job_dict(), width=8, height=8, spp=1))

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from relray.core import bsdf
-from relray.core.sampling import cosine_hemisphere, onb, rand_dims, to_world
+from relray.core.render import bsdf
+from relray.core.render.sampling import cosine_hemisphere, onb, rand_dims, to_world
 
 
 @njit(cache=True)
@@ -26,7 +26,7 @@ def _ggx_samples(wo, alpha, u1, u2):
 
 
 def _uniforms(n, dim0):
-    from relray.core.sampling import path_keys
+    from relray.core.render.sampling import path_keys
 
     keys = path_keys(7, 0, np.arange(n), np.zeros(n, np.int64))
     return rand_dims(keys, dim0), rand_dims(keys, dim0 + 1)

@@ -4,10 +4,10 @@ import math
 
 import numpy as np
 
-from relray.core import relativity
-from relray.core.camera import PinholeCamera
-from relray.core.job import look_at_rotation
-from relray.core.sampling import path_keys, sobol2_dims
+from relray.core.physics import relativity
+from relray.core.render.camera import PinholeCamera
+from relray.core.render.sampling import path_keys, sobol2_dims
+from relray.core.scene.job import look_at_rotation
 
 
 def camera(width=40, height=30, fov=50.0):

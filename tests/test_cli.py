@@ -111,7 +111,7 @@ def test_contact_sheet(tmp_path):
     sheet = tmp_path / "sheet.png"
     assert cli.main(["contact-sheet", str(tmp_path / "out"), "--out", str(sheet),
                      "--columns", "2"]) == 0
-    from relray.core.contact import read_png
+    from relray.core.output.contact import read_png
 
     assert read_png(sheet).shape == (16, 24 * 2 + 2, 3)
     r = run("contact-sheet", str(tmp_path / "empty"), "--out", str(sheet))

@@ -20,11 +20,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from relray.core import cli, farm
-from relray.core import job as jobmod
+from relray.core import cli, farm, progress
 from relray.core.errors import UserError
-from relray.core.imageio import frame_complete, read_exr
-from relray.core.render import frame_events, render_job
+from relray.core.output.imageio import frame_complete, read_exr
+from relray.core.runner import render_job
+from relray.core.scene import job as jobmod
+from relray.core.scene.motion import frame_events
 
 TINY = """
 [render]
@@ -84,7 +85,7 @@ def events_of(stdout: str) -> list[dict]:
     """Every stdout line must be one JSON event."""
     out = []
     for line in stdout.splitlines():
-        ev = farm.parse_event(line)
+        ev = progress.parse_event(line)
         assert ev is not None, f"not a JSON event: {line!r}"
         out.append(ev)
     return out
@@ -97,7 +98,7 @@ def pixels(out: Path, frame: int, name: str = "f_{frame:03d}") -> dict[str, np.n
 
 def assert_same_frames(a: Path, b: Path, frames, name: str = "f_{frame:03d}") -> None:
     """Bit-identical EXR channels and PNG pixels (metadata such as seconds may differ)."""
-    from relray.core.contact import read_png
+    from relray.core.output.contact import read_png
 
     for f in frames:
         pa, pb = pixels(a, f, name), pixels(b, f, name)
@@ -110,7 +111,7 @@ def assert_same_frames(a: Path, b: Path, frames, name: str = "f_{frame:03d}") ->
 
 def complete_frames(job: jobmod.Job) -> dict[int, int]:
     """frame -> EXR mtime_ns of the frames whose EXR is complete."""
-    from relray.core.render import frame_is_done
+    from relray.core.output.frame_files import frame_is_done
 
     return {f: (job.output.dir / f"f_{f:03d}.exr").stat().st_mtime_ns
             for f, ev in frame_events(job) if frame_is_done(job, f, ev)}
@@ -186,8 +187,8 @@ def test_render_command_and_env_run_the_cli():
                         "--frames", "3-5", "--overwrite"]
     env = farm.subprocess_env({"PATH": os.environ.get("PATH", "")})
     assert env["OPENBLAS_NUM_THREADS"] == "1" and env["PYTHONPATH"]
-    assert farm.parse_event('{"event": "start"}') == {"event": "start"}
-    assert farm.parse_event("relray: warning") is None
+    assert progress.parse_event('{"event": "start"}') == {"event": "start"}
+    assert progress.parse_event("relray: warning") is None
 
 
 def test_child_numba_cache_is_never_the_parents(monkeypatch):
@@ -283,7 +284,7 @@ def test_bad_farm_options_exit_2_and_write_nothing(tmp_path, capsys, args, key):
 def test_animation_on_cluster_is_bit_identical_and_resumes(tmp_path, client, reference):
     job = load(write_job(tmp_path, 6))
     stream = io.StringIO()
-    result = farm.render_on_dask(job, client, reporter=farm.JsonReporter(stream), threads=1)
+    result = farm.render_on_dask(job, client, reporter=progress.JsonReporter(stream), threads=1)
     assert sorted(result.rendered) == [1, 2, 3, 4, 5, 6] and not result.failed
     assert_same_frames(job.output.dir, reference[6], range(1, 7))
     ev = events_of(stream.getvalue())
@@ -367,7 +368,7 @@ def test_a_frame_that_always_crashes_fails_alone(tmp_path, client, reference, ca
 
 
 def test_still_in_sample_batches_is_the_same_for_any_number_of_workers(tmp_path, client):
-    from relray.core.spectrum import sensor_to_rgb
+    from relray.core.physics.spectrum import sensor_to_rgb
 
     text = TINY.replace("spp = 2", "spp = 12")
     job = load(write_job(tmp_path / "farm", 1, text))
@@ -407,7 +408,7 @@ def test_sigterm_cancels_a_local_render_cleanly(tmp_path):
         lines = []
         for line in p.stdout:
             lines.append(line)
-            if farm.parse_event(line)["event"] == "frame_done":
+            if progress.parse_event(line)["event"] == "frame_done":
                 break
         t0 = time.monotonic()
         p.send_signal(signal.SIGTERM)

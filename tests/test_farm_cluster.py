@@ -26,7 +26,7 @@ from test_farm import (
 )
 
 from relray.core import cli, farm
-from relray.core.render import render_job
+from relray.core.runner import render_job
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from relray.core.film import REL_ERROR_UNKNOWN, Film, band_centers, window_mean
+from relray.core.render.film import REL_ERROR_UNKNOWN, Film, band_centers, window_mean
 
 AOVS = ("depth", "doppler", "lab_time")
 
@@ -289,7 +289,7 @@ def test_sum_sq_holds_every_channel_and_sum_y2_is_its_luminance_column():
 
 def test_adaptive_error_is_the_documented_estimator():
     """se = sqrt(Σ_c var_c / n) over the three channels, divided by sqrt(I · Ī) with
-    I = |mean sensor vector| and Ī its image mean (core/film.py docstring)."""
+    I = |mean sensor vector| and Ī its image mean (core/render/film.py docstring)."""
     rng = np.random.default_rng(12)
     n_pix, n = 20, 300
     scale = rng.uniform(0.1, 3.0, (n_pix, 1, 3))

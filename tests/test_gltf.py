@@ -10,8 +10,9 @@ import pygltflib as g
 import pytest
 from scipy.spatial.transform import Rotation
 
-from relray.core import gltf, job, scene
 from relray.core.errors import UserError
+from relray.core.scene import geometry as scene
+from relray.core.scene import gltf, job, motion
 
 C = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # (x, y, z) -> (x, -z, y)
 
@@ -342,14 +343,14 @@ def test_corrupt_file_caught_while_loading_the_job(glb: Path, tmp_path: Path) ->
 
 def test_job_with_the_gltf_camera_renders(glb: Path, tmp_path: Path) -> None:
     """Without [camera] the glTF's camera places the shutter events and renders the frame."""
-    from relray.core import cli, render
+    from relray.core import cli
 
     (tmp_path / "job.toml").write_text(
         '[render]\nwidth = 8\nheight = 6\nspp = 1\n[motion]\nbeta = [0.5, 0, 0]\nct = 1\n'
         '[scene]\nfile = "scene.glb"\n')
     j = job.load_job(tmp_path / "job.toml")
-    cam = render.camera_settings(j)
-    (_, event), = render.frame_events(j)
+    cam = motion.camera_settings(j)
+    (_, event), = motion.frame_events(j)
     np.testing.assert_allclose(event.x, cam.position + np.array([0.5, 0, 0]) / math.sqrt(0.75))
     assert cli.main(["render", str(tmp_path / "job.toml"), "--quiet"]) == 0
     assert (tmp_path / "out" / "frame_0001.exr").is_file()

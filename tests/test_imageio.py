@@ -12,9 +12,9 @@ import OpenImageIO as oiio
 import pytest
 
 from relray import __version__
-from relray.core import imageio
 from relray.core.errors import UserError
-from relray.core.film import Film, FilmImage
+from relray.core.output import imageio
+from relray.core.render.film import Film, FilmImage
 
 H, W = 5, 7
 

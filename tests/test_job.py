@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from relray.core import job
 from relray.core.errors import UserError
+from relray.core.scene import job, motion
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -67,7 +67,7 @@ def test_defaults_match_job_format(tmp_path: Path) -> None:
     obj = s.objects[0]
     assert (obj.name, obj.shape, obj.material) == ("objects[0]", "sphere", "white")
     assert obj.params["radius"] == 0.5 and obj.params["subdivisions"] == 5
-    assert job.frame_list(j) == [1]
+    assert motion.frame_list(j) == [1]
 
 
 def test_arrays_are_read_only(tmp_path: Path) -> None:
@@ -131,7 +131,7 @@ power = 500
     np.testing.assert_array_equal(light.direction, [0, 0, -1])
     assert light.spot_size == pytest.approx(math.radians(60)) and light.spot_blend == 0.15
     np.testing.assert_array_equal(j.scene.objects[0].params["size"], [1, 2, 3])
-    assert job.frame_list(j) == list(range(1, 11))
+    assert motion.frame_list(j) == list(range(1, 11))
     assert "worldline" in job.job_summary(j)
 
 
@@ -409,8 +409,8 @@ def test_overrides(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert k.motion.ct == 2.5 and k.motion.frames == (1, 9)  # the animation is unchanged
     assert k.motion.render_frames == (3, 4)
     assert k.output.dir == tmp_path.resolve() / "renders"
-    assert job.frame_list(k) == [3, 4]
-    np.testing.assert_array_equal(job.beta_at_frame(k, 3), [0.5, 0, 0])
+    assert motion.frame_list(k) == [3, 4]
+    np.testing.assert_array_equal(motion.beta_at_frame(k, 3), [0.5, 0, 0])
     assert job.with_overrides(j) == j
     np.testing.assert_array_equal(job.with_overrides(j, beta=np.array([0, 0, 0.25])).motion.beta,
                                   [0, 0, 0.25])
@@ -453,18 +453,18 @@ def test_frame_list_and_beta_at_frame(tmp_path: Path) -> None:
                        "  {frame = 15, beta = [0.0, 0.9, 0.0]},\n"
                        "  {frame = 17, beta = [0.3, 0.0, 0.0]},\n]\n" + SCENE)
     assert j.motion.mode == "snapshot"  # keyframes are allowed in snapshot mode
-    assert job.frame_list(j) == list(range(0, 21))
-    np.testing.assert_allclose(job.beta_at_frame(j, 0), [0, 0, 0])  # held before the first key
-    np.testing.assert_allclose(job.beta_at_frame(j, 10), [0, 0.45, 0])
-    np.testing.assert_allclose(job.beta_at_frame(j, 16), [0.15, 0.45, 0])
-    np.testing.assert_allclose(job.beta_at_frame(j, 20), [0.3, 0, 0])  # held after the last
-    assert all(np.linalg.norm(job.beta_at_frame(j, f)) < 1 for f in job.frame_list(j))
+    assert motion.frame_list(j) == list(range(0, 21))
+    np.testing.assert_allclose(motion.beta_at_frame(j, 0), [0, 0, 0])  # held before the first key
+    np.testing.assert_allclose(motion.beta_at_frame(j, 10), [0, 0.45, 0])
+    np.testing.assert_allclose(motion.beta_at_frame(j, 16), [0.15, 0.45, 0])
+    np.testing.assert_allclose(motion.beta_at_frame(j, 20), [0.3, 0, 0])  # held after the last
+    assert all(np.linalg.norm(motion.beta_at_frame(j, f)) < 1 for f in motion.frame_list(j))
 
 
 def test_beta_without_keyframes(tmp_path: Path) -> None:
     j = load(tmp_path, "[motion]\nbeta = [0.1, 0.2, 0.3]\nframes = [1, 3]\n" + SCENE)
-    for f in job.frame_list(j):
-        np.testing.assert_array_equal(job.beta_at_frame(j, f), [0.1, 0.2, 0.3])
+    for f in motion.frame_list(j):
+        np.testing.assert_array_equal(motion.beta_at_frame(j, f), [0.1, 0.2, 0.3])
 
 
 def test_summary_mentions_the_essentials(tmp_path: Path) -> None:
@@ -539,10 +539,10 @@ def test_seed_figure_axis_mapping() -> None:
 
 def test_flyby_preset() -> None:
     j = job.load_job(ROOT / "presets" / "flyby.toml")
-    assert j.motion.mode == "worldline" and job.frame_list(j) == list(range(1, 49))
+    assert j.motion.mode == "worldline" and motion.frame_list(j) == list(range(1, 49))
     assert j.output.dir == ROOT / "out" / "flyby"
-    assert np.linalg.norm(job.beta_at_frame(j, 1)) == 0.0
-    assert np.linalg.norm(job.beta_at_frame(j, 48)) == pytest.approx(0.7)
+    assert np.linalg.norm(motion.beta_at_frame(j, 1)) == 0.0
+    assert np.linalg.norm(motion.beta_at_frame(j, 48)) == pytest.approx(0.7)
 
 
 # ----------------------------------------------------- validators for Python callers

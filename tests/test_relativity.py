@@ -1,4 +1,4 @@
-"""Tests of core/relativity.py: the analytic cases of physics.md, and invariants.
+"""Tests of core/physics/relativity.py: the analytic cases of physics.md, and invariants.
 
 Tolerances are derived from floating point, never tuned:
 - EPS is the float64 machine epsilon (2.2e-16). A formula evaluated in k correctly rounded
@@ -20,8 +20,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from relray.core import relativity as rel
 from relray.core.errors import UserError
+from relray.core.physics import relativity as rel
 
 EPS = float(np.finfo(np.float64).eps)
 X, Y, Z = np.eye(3)

@@ -1,14 +1,15 @@
-"""core/render.py: frame selection, adaptive sampling, transparent film."""
+"""core/render/frames.py: frame selection, adaptive sampling, transparent film."""
 
 import dataclasses
 from pathlib import Path
 
 import numpy as np
 
-from relray.core import job as jobmod
-from relray.core import render
-from relray.core.camera import PinholeCamera
-from relray.core.scene import build_scene
+from relray.core.render import frames as render
+from relray.core.render.camera import PinholeCamera
+from relray.core.scene import job as jobmod
+from relray.core.scene import motion
+from relray.core.scene.geometry import build_scene
 
 FLYBY = Path(__file__).resolve().parents[1] / "presets" / "flyby.toml"
 
@@ -21,7 +22,7 @@ def _renderer(noise_threshold: float, spp: int, width: int = 32, height: int = 3
                                    threads=job.render.threads if threads is None else threads)
     prep = render.prepare(build_scene(job), settings.spectral)
     cam = PinholeCamera.from_settings(job.camera, width, height)
-    event = render.frame_events(job)[0][1]
+    event = motion.frame_events(job)[0][1]
     return render.FrameRenderer(prep, settings, cam), event
 
 
@@ -123,7 +124,7 @@ def test_adaptive_progress_counts_every_path_of_the_cap():
 def test_transparent_film_hides_the_sky_from_the_camera_only():
     """render.transparent: escaped camera rays give alpha 0 and no radiance, while the sky
     still lights the scene (lit pixels are unchanged, sample for sample)."""
-    from relray.core.job import parse_job
+    from relray.core.scene.job import parse_job
 
     data = {"render": {"width": 16, "height": 12, "spp": 4, "max_depth": 3},
             "scene": {"background": [0.5, 0.6, 0.7]},
@@ -137,7 +138,7 @@ def test_transparent_film_hides_the_sky_from_the_camera_only():
         prep = render.prepare(build_scene(job), "cie1931")
         cam = PinholeCamera.from_settings(job.camera, 16, 12)
         fr = render.FrameRenderer(prep, job.render, cam)
-        film, _ = fr.render(render.frame_events(job)[0][1], 1)
+        film, _ = fr.render(motion.frame_events(job)[0][1], 1)
         images.append(film.resolve(fr.to_rgb).rgba)
     opaque, clear = images
     sky = opaque[..., 3] == 0
@@ -150,8 +151,8 @@ def test_transparent_film_hides_the_sky_from_the_camera_only():
 
 def test_sub_range_has_the_full_animations_shutter_events():
     job = jobmod.load_job(FLYBY)
-    full = dict(render.frame_events(job))
-    part = render.frame_events(jobmod.with_overrides(job, frames=(40, 42)))
+    full = dict(motion.frame_events(job))
+    part = motion.frame_events(jobmod.with_overrides(job, frames=(40, 42)))
     assert [f for f, _ in part] == [40, 41, 42]
     for f, ev in part:
         assert ev.t == full[f].t and ev.tau == full[f].tau

@@ -79,8 +79,8 @@ from render_helpers import (
     render,
 )
 
-from relray.core import spectrum
-from relray.core.render import frame_events
+from relray.core.physics import spectrum
+from relray.core.scene.motion import frame_events
 
 B = 0.5
 GAMMA = 1.0 / math.sqrt(1.0 - B * B)
@@ -936,7 +936,7 @@ def test_direct_lighting_of_a_floor(tmp_path, kind, beta):
 
 
 def test_nee_shadow_ray_reaches_its_light(tmp_path):
-    """Minimal demonstration of the NEE self-hit bug (core/integrator.py, shade()).
+    """Minimal demonstration of the NEE self-hit bug (core/render/integrator.py, shade()).
 
     One pixel looking straight down at the floor point (0, 2, 0) of an 80 m floor (scene
     extent 80 -> eps = 1e-5·80 = 8e-4), lit by a 1.2 m square one-sided lamp 1.5 m up.

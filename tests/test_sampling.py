@@ -5,7 +5,7 @@ import math
 import numpy as np
 from numba import njit
 
-from relray.core import sampling
+from relray.core.render import sampling
 
 
 def test_rng_is_deterministic_and_uniform():

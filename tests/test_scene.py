@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from relray.core import job, scene, shapes
 from relray.core.errors import UserError
+from relray.core.scene import geometry as scene
+from relray.core.scene import job, shapes
 
 
 def tri_areas(t: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Tests of core/spectrum.py: grid, sensor, sampler, emitters and RGB -> spectrum fits.
+"""Tests of core/physics/spectrum.py: grid, sensor, sampler, emitters and RGB -> spectrum fits.
 
 Every tolerance is stated next to where it comes from (float32 storage, the grid's linear
 interpolation, Monte Carlo standard errors, or the reference's own accuracy).
@@ -12,9 +12,9 @@ import colour
 import numpy as np
 import pytest
 
-from relray.core import sigmoid
-from relray.core import spectrum as sp
-from relray.core.sigmoid import CoefficientCache
+from relray.core.physics import sigmoid
+from relray.core.physics import spectrum as sp
+from relray.core.physics.sigmoid import CoefficientCache
 
 LAM1 = sp.sensor_nm()  # 360..830, 1 nm
 WP_D65 = np.array([0.3127, 0.3290])  # Lab reference white for ΔE00
@@ -575,10 +575,10 @@ def test_lanes_write_into_given_buffers():
 
 # --------------------------------------------------------------------------- embedded data
 def test_embedded_cie_tables_match_colour_science():
-    """core/cie_tables.py holds colour-science's tables (regenerate on upgrade), up to the
+    """core/physics/cie_tables.py holds colour-science's tables (regenerate on upgrade), up to the
     CPU-dependent rounding of colour-science's interpolation (seen: 11 ulps of the largest
     value on AMD EPYC against the Intel machine that generated them)."""
-    from relray.core import cie_tables
+    from relray.core.physics import cie_tables
 
     ref = cie_tables.from_colour()
     for name in ("CMF_CIE1931_2", "D65_5NM", "PRIMARIES_SRGB_XY"):
@@ -603,7 +603,7 @@ def test_tables_need_no_colour_science_import():
     import subprocess
     import sys
 
-    code = ("import sys; from relray.core import spectrum as sp; "
+    code = ("import sys; from relray.core.physics import spectrum as sp; "
             "sp.make_sampler('cie1931'); sp.sensor_to_rgb('cie1931'); sp.d65_ext(); "
             "sp.rgb_reflectance([[0.7, 0.2, 0.1]]); sp.rgb_illuminant([1.0, 0.5, 0.2]); "
             "assert 'colour' not in sys.modules, 'colour imported'")

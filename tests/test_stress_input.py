@@ -44,9 +44,11 @@ from test_cli import TINY
 from test_job import BAD_JOBS, SCENE
 from test_stress_render import assert_finite, render_case
 
-from relray.core import cli, gltf, job, scene
+from relray.core import cli
 from relray.core.errors import UserError
-from relray.core.imageio import read_exr
+from relray.core.output.imageio import read_exr
+from relray.core.scene import geometry as scene
+from relray.core.scene import gltf, job
 
 pytestmark = pytest.mark.stress
 
@@ -321,7 +323,7 @@ def test_largest_allowed_image_is_rejected_here_if_it_cannot_fit(tmp_path):
 
 
 def test_line_range_mirrors_the_spectral_grid():
-    from relray.core import spectrum
+    from relray.core.physics import spectrum
 
     assert job.LINE_RANGE_NM == (spectrum.GRID_MIN_NM, spectrum.GRID_MAX_NM)
 

@@ -1,4 +1,4 @@
-"""Stress properties of core/relativity.py as β -> 1 (issue 5, part 1).
+"""Stress properties of core/physics/relativity.py as β -> 1 (issue 5, part 1).
 
 tests/test_relativity.py already checks, for speeds up to 1 - 1e-12: the metric and
 Λ(β)Λ(-β) = I for one direction per speed; aberration round trips and unit length;
@@ -40,8 +40,8 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from stress_config import pick
 
-from relray.core import relativity as rel
-from relray.core.camera import lab_rays
+from relray.core.physics import relativity as rel
+from relray.core.render.camera import lab_rays
 
 pytestmark = pytest.mark.stress
 

@@ -14,7 +14,7 @@ prepare -> FrameRenderer -> Film.resolve, as tests/render_helpers.py) and is che
 3. **Brightness against the D range (the D⁵ law, exactly)**: the same job is rendered
    twice with the same seed, ``searchlight`` on and off. Every random number, path and
    hero wavelength is the same (Russian roulette ignores the D⁵ film weight, see
-   core/integrator.py), so per pixel and per sensor channel (XYZ)
+   core/render/integrator.py), so per pixel and per sensor channel (XYZ)
    ``S_on = Σ_i D_i⁵ s_i`` and ``S_off = Σ_i s_i`` with s_i >= 0: the ratio S_on / S_off
    is a weighted mean of D_i⁵ and lies in [min D⁵, max D⁵] over the pixel. For a
    uniform sky with ``doppler = false`` this is the D⁵ law itself, at every β up to
@@ -47,8 +47,9 @@ import pytest
 from render_helpers import base_job, make_job, ndc
 from stress_config import only_in_stress, pick
 
-from relray.core import scene as scene_mod
-from relray.core.render import build_renderer, frame_events, prepare
+from relray.core.render.frames import build_renderer, prepare
+from relray.core.scene import geometry as scene_mod
+from relray.core.scene.motion import frame_events
 
 pytestmark = pytest.mark.stress
 

@@ -1,4 +1,4 @@
-"""core/render.py FrameRenderer._trace_chunk: reused per-thread buffers, optional AOVs."""
+"""core/render/frames.py FrameRenderer._trace_chunk: reused per-thread buffers, optional AOVs."""
 
 import dataclasses
 from pathlib import Path
@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from relray.core import job as jobmod
-from relray.core import render
-from relray.core.camera import PinholeCamera
-from relray.core.scene import build_scene
+from relray.core.render import frames as render
+from relray.core.render.camera import PinholeCamera
+from relray.core.scene import job as jobmod
+from relray.core.scene.geometry import build_scene
 
 CORNELL = Path(__file__).resolve().parents[1] / "presets" / "cornell.toml"
 ALL_AOVS = ("depth", "doppler", "lab_time")
@@ -30,7 +30,7 @@ def _render(cornell, mode, aovs=(), bands=None, threads=1, spp=4, beta=(0.0, 0.5
         cam = PinholeCamera.from_settings(job.camera, s.width, s.height)
         renderer = render.FrameRenderer(render.prepare(scene, mode), s, cam, aovs=aovs,
                                         bands=bands)
-    from relray.core import relativity
+    from relray.core.physics import relativity
 
     ev = relativity.snapshot_event(np.asarray(job.camera.position, np.float64),
                                    np.asarray(beta, np.float64), 0.0)

@@ -288,7 +288,7 @@ def test_camera_matches_blenders_projection(ext, fit, size, shift):
     scene.camera = cam
     bpy.context.view_layer.update()
     export = ext_module("relblend.export")
-    core_camera = ext_module("core.camera")
+    core_camera = ext_module("core.render.camera")
     settings = export.camera_settings(cam, *size)
     pin = core_camera.PinholeCamera.from_settings(settings, *size)
     w, h = size

@@ -18,18 +18,19 @@ from conftest import HOST, ext_module
 
 def core_render(job_path: Path, frame: int) -> tuple[np.ndarray, object]:
     """The core's render of one frame of a job file (as `relray render`), in memory."""
-    job_mod = ext_module("core.job")
-    render = ext_module("core.render")
-    scene_mod = ext_module("core.scene")
-    camera = ext_module("core.camera")
+    job_mod = ext_module("core.scene.job")
+    render = ext_module("core.render.frames")
+    scene_mod = ext_module("core.scene.geometry")
+    motion = ext_module("core.scene.motion")
+    camera = ext_module("core.render.camera")
     job = job_mod.load_job(job_path)
     scene = scene_mod.build_scene(job)
-    cam = render.resolve_camera(job, scene)
+    cam = motion.resolve_camera(job, scene)
     s = job.render
     renderer = render.FrameRenderer(render.prepare(scene, s.spectral), s,
                                     camera.PinholeCamera.from_settings(cam, s.width, s.height),
                                     aovs=job.output.aovs)
-    event = dict(render.frame_events(job))[frame]
+    event = dict(motion.frame_events(job))[frame]
     film, _ = renderer.render(event, frame)
     return film.resolve(renderer.to_rgb).rgba, event
 
@@ -121,12 +122,12 @@ def test_farm_animation_has_the_engines_events(cornell, engine, tmp_path):
     rendering.set_output(scene, tmp_path, "f", "PNG")
     rendering.render_animation(scene)
     assert bpy.ops.relray.export_farm(directory=str(tmp_path / "farm")) == {"FINISHED"}
-    job_mod = ext_module("core.job")
-    render = ext_module("core.render")
+    job_mod = ext_module("core.scene.job")
+    motion = ext_module("core.scene.motion")
     job = job_mod.load_job(tmp_path / "farm" / "job.toml")
     assert job.motion.mode == "worldline" and job.motion.frames == (1, 4)
     assert len(job.motion.keyframes) == 4 and job.motion.ct_per_frame == pytest.approx(0.4)
-    for frame, ev in render.frame_events(job):
+    for frame, ev in motion.frame_events(job):
         got = engine.RESULTS[frame]["event"]
         np.testing.assert_allclose(ev.x, got.x, atol=1e-9)
         np.testing.assert_allclose(ev.beta, got.beta, atol=1e-9)

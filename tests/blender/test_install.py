@@ -17,7 +17,7 @@ def test_zip_installs_and_enables(installed):
     assert manifest["blender_version_min"] == "4.2.0"
     assert installed.path.is_relative_to(installed.user_dir)
     assert EXT_MODULE in bpy.context.preferences.addons.keys()
-    assert (installed.path / "core" / "render.py").is_file()
+    assert (installed.path / "core" / "render" / "frames.py").is_file()
     assert (installed.path / "presets" / "motion").is_dir()
     print(f"install + enable: {installed.seconds * 1000:.0f} ms")
 

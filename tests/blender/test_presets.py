@@ -74,7 +74,8 @@ def test_motion_helpers(ext):
     assert motion.affine_fit([1, 2, 3], [0.5, 1.0, 1.5]) == pytest.approx((0.5, 0.5))
     assert motion.affine_fit([1, 2, 3], [0.0, 0.2, 1.0]) is None
     lo, hi = motion.view_doppler_range(
-        ext_module("core.job").CameraSettings(position=np.zeros(3), rotation=rot, fov=40.0),
+        ext_module("core.scene.description").CameraSettings(position=np.zeros(3), rotation=rot,
+                                                            fov=40.0),
         np.array([0, 0.5, 0]), 32, 32)
     assert hi == pytest.approx(math.sqrt(3), rel=1e-12) and lo < hi
 

@@ -131,7 +131,7 @@ def test_worldline_integrates_keyframed_beta(cornell, engine):
     scene.render.resolution_x = scene.render.resolution_y = 8
     scene.relray.samples = 1
     rendering.render_animation(scene)
-    relativity = ext_module("core.relativity")
+    relativity = ext_module("core.physics.relativity")
     pos = np.array(cam_obj.location)
     f32 = np.float32  # the properties store float32: 0.6 and 0.3 (interpolated) as such
     keys = [(1, np.zeros(3)), (2, np.array([0, f32(0.3), 0])), (3, np.array([0, f32(0.6), 0]))]

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from .errors import UserError
+from ..errors import UserError
 from .imageio import atomic_write, write_pixels
 
 

@@ -1,4 +1,4 @@
-"""Frames: from a job to films and files.
+"""Rendering one frame: from a prepared scene and a shutter event to a film.
 
 ``prepare`` turns a :class:`scene.Scene` into what the kernels need (Embree BVH, spectral
 tables, light table) once per job; every frame of an animation reuses it.
@@ -22,11 +22,14 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import relativity, spectrum
+from ..physics import relativity, spectrum
+from ..scene.description import Job, RenderSettings
+from ..scene.geometry import Scene, build_scene
+from ..scene.motion import resolve_camera
 from .accel import MISS_DISTANCE, Accel
 from .camera import PinholeCamera
 from .film import Film
@@ -38,11 +41,9 @@ from .integrator import (
     triangle_geometry,
     wavefront_buffers,
 )
-from .job import Job, RenderSettings, beta_at_frame, frame_list
 from .lights import LightTable, build_lights
 from .materials import SpectralTables, build_tables
 from .sampling import path_keys, progressive_offsets
-from .scene import Scene
 
 WAVEFRONT = 1 << 16
 #: The per-chunk arrays of :meth:`FrameRenderer._trace_chunk` (see wavefront_buffers).
@@ -79,40 +80,8 @@ def prepare(scene: Scene, mode: str) -> PreparedScene:
     return PreparedScene(scene, accel, tables, lights, kscene, radius, mode)
 
 
-def frame_events(job: Job) -> list[tuple[int, relativity.ShutterEvent]]:
-    """The shutter event of every frame of the job (physics.md, "Camera worldline")."""
-    mo = job.motion
-    frames = frame_list(job)
-    position = np.asarray(camera_settings(job).position, np.float64)
-    if mo.mode == "worldline":
-        events = relativity.worldline_events(
-            position, mo.frames, mo.ct, mo.ct_per_frame,
-            keyframes=mo.keyframes, beta_const=None if mo.keyframes else mo.beta,
-            proper_acceleration=mo.proper_acceleration)
-        by_frame = dict(zip(range(mo.frames[0], mo.frames[1] + 1), events, strict=True))
-        return [(f, by_frame[f]) for f in frames]
-    out = []
-    for f in frames:
-        ct = mo.ct + (f - mo.frames[0]) * mo.ct_per_frame
-        out.append((f, relativity.snapshot_event(position, beta_at_frame(job, f), ct)))
-    return out
 
 
-def camera_settings(job: Job):
-    """The job's [camera], else the glTF file's first camera (read from its JSON only).
-
-    Raises a UserError naming ``camera`` when there is neither.
-    """
-    from .errors import UserError
-    from .gltf import find_camera
-
-    cam = job.camera
-    if cam is None and job.scene.file is not None:
-        cam = find_camera(job.scene.file, job_file=job.path)
-    if cam is None:
-        raise UserError("no camera: add a [camera] table or a camera to the glTF file",
-                        key="camera", file=job.path)
-    return cam
 
 
 ADAPTIVE_FIRST_PASS = 64
@@ -132,7 +101,7 @@ def sample_passes(s_lo: int, s_hi: int, adaptive: bool) -> list[tuple[int, int]]
     keeps when it stops — [0, 2^k F) — are a power-of-two prefix of its Owen-scrambled
     Sobol sequence, a (0, m, 2)-net.  After each pass but the last, every pixel for
     which :meth:`Film.converged` holds (its error and its 3x3 window's mean error at most
-    ``noise_threshold``, see core/film.py) stops; the others take the next pass.
+    ``noise_threshold``, see core/render/film.py) stops; the others take the next pass.
     """
     if not adaptive:
         return [(s_lo, s_hi)]
@@ -309,106 +278,21 @@ class FrameRenderer:
         self._chunk_buffers.append(keep)
 
 
-def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent) -> dict[str, str]:
-    """What a finished frame records (and what resume compares)."""
-    from .imageio import metadata_for
-
-    return metadata_for(frame, event.beta, float(event.tau), job.render.spp,
-                        extra={"relray:spectral": job.render.spectral,
-                               "relray:t_lab": repr(float(event.t)),
-                               "relray:seed": str(job.render.seed)})
 
 
-def frame_is_done(job: Job, frame: int, event: relativity.ShutterEvent) -> bool:
-    """A frame is done when every requested file exists and its EXR says it is complete."""
-    from .imageio import frame_complete
-
-    out = job.output
-    stem = out.name.format(frame=frame)
-    wanted = {"exr": f"{stem}.exr", "png": f"{stem}.png", "spectral-exr": f"{stem}.spectral.exr"}
-    if not all((out.dir / wanted[f]).exists() for f in out.formats):
-        return False
-    if "exr" in out.formats:
-        meta = frame_metadata(job, frame, event)
-        keys = ("relray:spp", "relray:beta", "relray:ct", "relray:spectral", "relray:seed")
-        return frame_complete(out.dir / wanted["exr"], {k: meta[k] for k in keys})
-    return True
 
 
-def resolve_camera(job: Job, scene: Scene):
-    """The job's [camera], else the built scene's (glTF) camera, else a clear error."""
-    return job.camera or scene.camera or camera_settings(job)
 
 
-def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,
-               reporter=None, cancel: Callable[[], bool] | None = None) -> list:
-    """Render every frame of ``job`` that is not already done; return the written paths.
-
-    This is the local default: one process, frames one after another, every core on the
-    frame in flight through the renderer's threads. ``reporter`` (a
-    :class:`.farm.Reporter`) hears the plan ("N done, M to render"), the progress in
-    paths, each finished frame and the end; by default a tqdm bar (nothing without
-    ``show_progress``). ``cancel`` is polled between wavefronts; when it says True the
-    frame in flight stops with :class:`RenderCancelled` (finished frames stay).
-    """
-    from .farm import default_reporter
-    from .scene import build_scene
-
-    reporter = reporter if reporter is not None else default_reporter(show_progress)
-    t0 = time.perf_counter()
-    scene = build_scene(job)
-    resolve_camera(job, scene)
-    plan = plan_frames(job, overwrite)
-    s = job.render
-    reporter.start(job, plan, mode="local", units=len(plan.todo) * s.width * s.height * s.spp,
-                   unit="path")
-    written: list = []
-    if plan.todo:
-        renderer = build_renderer(job, scene)
-        for frame, ev in plan.todo:
-            film, stats = renderer.render(ev, frame, progress=reporter.advance, cancel=cancel)
-            paths = write_film(job, frame, ev, film, renderer.to_rgb, stats.seconds,
-                               (stats.d_min, stats.d_max))
-            written += paths
-            reporter.frame_done(frame, paths, stats.seconds, (stats.d_min, stats.d_max))
-    reporter.finish("ok", time.perf_counter() - t0)
-    return written
 
 
-@dataclass
-class FramePlan:
-    """Which frames of a job's range still need rendering (resume), from :func:`plan_frames`."""
-
-    frames: list[int]
-    todo: list[tuple[int, relativity.ShutterEvent]]
-    stale_temps_removed: int = 0
-
-    @property
-    def done(self) -> int:
-        """Frames of the range already complete (skipped)."""
-        return len(self.frames) - len(self.todo)
 
 
-def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
-    """The frames to render: all with ``overwrite``, else those not :func:`frame_is_done`.
-
-    Also removes stale temporary files of interrupted writes from the output folder.
-    """
-    from .imageio import remove_stale_temps
-
-    events = frame_events(job)
-    todo = [(f, ev) for f, ev in events if overwrite or not frame_is_done(job, f, ev)]
-    removed = remove_stale_temps(job.output.dir) if job.output.dir.exists() else 0
-    return FramePlan([f for f, _ in events], todo, removed)
 
 
 def build_renderer(job: Job, scene: Scene | None = None,
                    threads: int | None = None) -> FrameRenderer:
     """A :class:`FrameRenderer` for ``job`` (scene, BVH, tables); ``threads`` overrides."""
-    from dataclasses import replace
-
-    from .scene import build_scene
-
     scene = scene if scene is not None else build_scene(job)
     cam = resolve_camera(job, scene)
     s = job.render if threads is None else replace(job.render, threads=int(threads))
@@ -418,19 +302,3 @@ def build_renderer(job: Job, scene: Scene | None = None,
                          aovs=job.output.aovs, bands=bands)
 
 
-def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
-               to_rgb: np.ndarray, seconds: float, d_range: tuple[float, float]) -> list:
-    """Resolve ``film`` and write the frame's files atomically (EXR last); return the paths."""
-    import logging
-
-    from .imageio import write_frame
-
-    if film.nonfinite_samples:
-        logging.getLogger("relray").warning("frame %d: %d non-finite samples dropped", frame,
-                                            film.nonfinite_samples)
-    image = film.resolve(to_rgb)
-    meta = frame_metadata(job, frame, event)
-    meta["relray:seconds"] = f"{seconds:.3f}"
-    meta["relray:doppler_range"] = f"{d_range[0]:.6g},{d_range[1]:.6g}"
-    return write_frame(job.output.dir, job.output.name.format(frame=frame), job.output.formats,
-                       image, meta, job.output.exposure)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import spectrum
+from ..physics import spectrum
 from .materials import SpectralTables, light_spectrum
 
 TRIANGLE, POINT, SPOT, SUN, SKY = 0, 1, 2, 3, 4

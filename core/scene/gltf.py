@@ -61,8 +61,8 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from .errors import UserError
-from .job import CameraSettings, LightSpec, MaterialSpec
+from ..errors import UserError
+from .description import CameraSettings, LightSpec, MaterialSpec
 from .shapes import face_normals
 
 log = logging.getLogger("relray")

@@ -35,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import user_cache_dir
+
 # A colour counts as converged when every RGB residual is below this (absolute, linear RGB).
 # 1e-12 is ~1e4 float64 ulps of a unit value and far below what any ΔE00 can resolve
 # (ΔE00 ≈ 1e-9 even at L* = 1).
@@ -281,8 +283,6 @@ class CoefficientCache:
         """The cache file for a model tag, or None when the disk cache is disabled."""
         if os.environ.get("RELRAY_DISK_CACHE", "1") == "0":
             return None
-        from . import user_cache_dir
-
         return Path(user_cache_dir()) / f"{self.version}-{tag}.npz"
 
     def load(self, tag: str) -> None:

@@ -59,9 +59,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import UserError
 from . import gltf, shapes
-from .errors import UserError
-from .job import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
+from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
 
 log = logging.getLogger("relray")
 

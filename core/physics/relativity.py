@@ -51,7 +51,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike
 
-from .errors import UserError
+from ..errors import UserError
 
 __all__ = [
     "ShutterEvent",

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import relativity
-from .job import CameraSettings
-from .relativity import aberrate_doppler_ray
+from ..physics import relativity
+from ..physics.relativity import aberrate_doppler_ray
+from ..scene.description import CameraSettings
 from .sampling import sobol2
 
 

@@ -30,7 +30,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from . import spectrum
+from ..physics import spectrum
 from .accel import MISS_DISTANCE, Accel
 from .bsdf import DELTA_ALPHA, fresnel_dielectric, ggx_sample_h, principled_eval, schlick_weight
 from .lights import SKY, SPOT, SUN, TRIANGLE, LightTable, select, spot_mask

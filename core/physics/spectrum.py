@@ -1,6 +1,6 @@
 """Spectra: the lab-wavelength grid, the sensor, hero-wavelength sampling and every table.
 
-What it provides (docs/interfaces.md, "core/spectrum.py"; physics.md, "Spectral model"):
+What it provides (docs/interfaces.md, "core/physics/spectrum.py"; physics.md, "Spectral model"):
 
 * the global **lab-wavelength grid**, log-spaced from 1 nm to 100 µm (``GRID_*``,
   :func:`grid_nm`, :func:`lookup`).  All tables here are float32 rest-frame spectra in the

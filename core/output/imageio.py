@@ -68,16 +68,16 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from .. import __version__
-from .errors import UserError
-from .film import FilmImage
+from ... import __version__
+from ..errors import UserError
+from ..render.film import FilmImage
+from ..scene.description import OUTPUT_FORMATS
 
 AOV_CHANNELS: dict[str, str] = {"depth": "Depth.Z", "doppler": "Doppler.D", "lab_time": "LabTime.T"}
 """EXR channel name of each known AOV; other AOVs keep their own name."""
 
 RGBA_CHANNELS = ("R", "G", "B", "A")
 
-FORMATS = ("exr", "png", "spectral-exr")
 """Values accepted in ``output.formats``."""
 
 SPECTRAL_ATTRIBUTES: dict[str, str] = {
@@ -383,10 +383,10 @@ def write_frame(
     finished EXR (:func:`frame_complete`) implies the frame's other files are finished.
     """
     wanted = list(dict.fromkeys(formats))
-    unknown = [f for f in wanted if f not in FORMATS]
+    unknown = [f for f in wanted if f not in OUTPUT_FORMATS]
     if unknown:
         raise UserError(
-            f"unknown image format(s) {unknown}; choose from {list(FORMATS)}",
+            f"unknown image format(s) {unknown}; choose from {list(OUTPUT_FORMATS)}",
             key="output.formats",
         )
     if "spectral-exr" in wanted and image.spectral is None:

@@ -23,10 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import spectrum
-from .job import MaterialSpec
-
-MODES = ("cie1931", "seed-gaussian", "rgb")
+from ..physics import spectrum
+from ..scene.description import MaterialSpec
 
 
 @dataclass
@@ -114,7 +112,7 @@ def reflectance_rows(materials: list[MaterialSpec], mode: str) -> np.ndarray:
 
 def build_tables(materials: list[MaterialSpec], mode: str) -> SpectralTables:
     """Tabulate every material for the kernels (see the module table)."""
-    if mode not in MODES:
+    if mode not in spectrum.MODES:
         raise ValueError(f"unknown spectral mode {mode!r}")
     g = grid_size(mode)
     refl = reflectance_rows(materials, mode) if materials else np.zeros((0, g), np.float32)

@@ -100,21 +100,33 @@ import math
 import os
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import shapes
-from .errors import UserError
+from ..errors import UserError
+from . import gltf, shapes
+from .description import (
+    AOV_NAMES,
+    LIGHT_TYPES,
+    MOTION_MODES,
+    OUTPUT_FORMATS,
+    SHAPES,
+    SPECTRAL_MODES,
+    CameraSettings,
+    Job,
+    LightSpec,
+    MaterialSpec,
+    MotionSettings,
+    ObjectSpec,
+    OutputSettings,
+    RenderSettings,
+    SceneSpec,
+    frozen,
+)
 
-SPECTRAL_MODES = ("cie1931", "seed-gaussian", "rgb")
-OUTPUT_FORMATS = ("exr", "png", "spectral-exr")
-AOV_NAMES = ("depth", "doppler", "lab_time")
-MOTION_MODES = ("snapshot", "worldline")
-SHAPES = ("sphere", "box", "quad", "mesh")
-LIGHT_TYPES = ("point", "spot", "sun", "area")
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".glb", ".gltf")
 GLTF_SUFFIXES = (".glb", ".gltf")
 
@@ -146,219 +158,7 @@ SENSOR_RANGE_NM = (360.0, 830.0)
 #: Tolerance of the orthonormality check of camera rotations and matrices.
 ROTATION_TOL = 1e-4
 
-# ----------------------------------------------------------------------------- specs
-
-
-@dataclass(frozen=True)
-class RenderSettings:
-    """The ``[render]`` table."""
-
-    width: int = 256
-    height: int = 256
-    spp: int = 64
-    noise_threshold: float = 0.0
-    max_depth: int = 8
-    seed: int = 0
-    spectral: str = "cie1931"
-    doppler: bool = True
-    searchlight: bool = True
-    threads: int = 0
-    transparent: bool = False
-
-
-@dataclass(frozen=True)
-class OutputSettings:
-    """The ``[output]`` table. ``dir`` is absolute."""
-
-    dir: Path
-    name: str = "frame_{frame:04d}"
-    formats: tuple[str, ...] = ("exr", "png")
-    spectral_bands: tuple[float, float, float] = (380.0, 780.0, 10.0)
-    aovs: tuple[str, ...] = ("depth", "doppler", "lab_time")
-    exposure: float = 0.0
-
-
-@dataclass(frozen=True, eq=False)
-class CameraSettings:
-    """The ``[camera]`` table, resolved to a position and a camera-to-world rotation.
-
-    ``rotation`` (3, 3): columns are the camera's right, up and backward axes in the
-    camera's rest frame (numerically the lab axes: the boost is pure). The camera looks
-    along ``-rotation[:, 2]``. ``fov`` is the vertical full angle in degrees.
-    """
-
-    position: np.ndarray
-    rotation: np.ndarray
-    fov: float = 39.6
-    shift: tuple[float, float] = (0.0, 0.0)
-
-    @property
-    def forward(self) -> np.ndarray:
-        return -self.rotation[:, 2]
-
-
-@dataclass(frozen=True, eq=False)
-class MotionSettings:
-    """The ``[motion]`` table. ``keyframes`` are (frame, beta) sorted by frame."""
-
-    mode: str = "snapshot"
-    beta: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(3)))
-    ct: float = 0.0
-    frames: tuple[int, int] = (1, 1)
-    ct_per_frame: float = 0.0
-    keyframes: tuple[tuple[int, np.ndarray], ...] = ()
-    proper_acceleration: np.ndarray | None = None
-    render_frames: tuple[int, int] | None = None  # --frames: a sub-range to render
-
-
-@dataclass(frozen=True)
-class MaterialSpec:
-    """One ``[[materials]]`` entry (Principled-BSDF-like, colours linear Rec.709).
-
-    ========================  =========================  =======  ===============================
-    key                       type                       default  meaning
-    ========================  =========================  =======  ===============================
-    ``name``                  str, *required*, unique
-    ``base_color``            [r, g, b] in [0, 1]        0.8 grey  as Blender's default material
-    ``roughness``             float in [0, 1]            0.5
-    ``metallic``              float in [0, 1]            0.0
-    ``transmission``          float in [0, 1]            0.0
-    ``ior``                   float >= 1                 1.5
-    ``emission``              [r, g, b] >= 0             0 0 0    times ``emission_strength``
-    ``emission_strength``     float >= 0                 0.0      radiance scale
-    ``emission_blackbody``    float > 0 (K)              --       Planck spectrum instead of RGB
-    ``emission_line``         [centre, sigma] nm > 0     --       Gaussian line (tests)
-    ``emission_spectrum``     {nm = [..], values = [..]}  --      tabulated, nm increasing
-    ``reflectance_uv``        float in [0, 1]            --       reflectance below the visible
-    ``reflectance_ir``        float in [0, 1]            --       reflectance above the visible
-    ``one_sided_emission``    bool                       false    emit only on the front face,
-                                                                  normal (v1-v0)×(v2-v0)
-    ========================  =========================  =======  ===============================
-
-    At most one of ``emission_blackbody``, ``emission_line`` and ``emission_spectrum``.
-    """
-
-    name: str
-    base_color: tuple[float, float, float] = (0.8, 0.8, 0.8)
-    roughness: float = 0.5
-    metallic: float = 0.0
-    transmission: float = 0.0
-    ior: float = 1.5
-    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    emission_strength: float = 0.0
-    emission_blackbody: float | None = None
-    emission_line: tuple[float, float] | None = None
-    emission_spectrum: tuple[tuple[float, ...], tuple[float, ...]] | None = None
-    reflectance_uv: float | None = None
-    reflectance_ir: float | None = None
-    one_sided_emission: bool = False
-
-
-@dataclass(frozen=True, eq=False)
-class ObjectSpec:
-    """One ``[[objects]]`` entry.
-
-    Common keys: ``name`` (str, default "objects[i]"), ``shape`` (*required*),
-    ``material`` (*required*, a material name), ``velocity`` ([vx, vy, vz], must be 0
-    for now). ``params`` holds the shape's validated parameters:
-
-    ==========  ===========================================================================
-    shape       params (*required* first)
-    ==========  ===========================================================================
-    sphere      ``center`` (3,), ``radius`` > 0; ``subdivisions`` int 0..8 (default 5)
-    box         ``center`` (3,), ``size`` scalar or (3,) > 0 (stored (3,));
-                ``rotation_z`` degrees (0)
-    quad        ``corners`` (4, 3): planar, convex, in order around the quad
-    mesh        ``file`` (.ply/.obj/.stl/.glb/.gltf, relative to the job; stored absolute);
-                ``translate`` (3,) (0), ``scale`` scalar or (3,) > 0 (stored (3,), 1),
-                ``rotation_z`` degrees (0), ``up`` "z" | "y" (the file's up axis; "y" is
-                turned to z as Blender does: default "y" for glTF, "z" otherwise),
-                ``smooth`` bool (false; .ply/.obj/.stl only: vertex normals by trimesh)
-    ==========  ===========================================================================
-
-    The mesh transform is v -> Rz(rotation_z) · (scale ⊙ v) + translate.
-    """
-
-    name: str
-    shape: str
-    material: str
-    params: dict[str, Any]
-    velocity: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(3)))
-
-
-@dataclass(frozen=True, eq=False)
-class LightSpec:
-    """One ``[[lights]]`` entry (Blender light semantics).
-
-    =================  =====================  ============  =====================================
-    key                type                   default       applies to
-    =================  =====================  ============  =====================================
-    ``type``           str, *required*                      "point" | "spot" | "sun" | "area"
-    ``name``           str                    ""            all
-    ``position``       [x, y, z]              [0, 0, 0]     all (unused by sun)
-    ``direction``      [x, y, z] != 0         [0, 0, -1]    spot, sun, area: where light goes
-    ``color``          [r, g, b] >= 0         [1, 1, 1]     all
-    ``power``          float >= 0             1000 (sun 1)  W; sun: irradiance W/m²
-    ``spot_size``      degrees in (0, 180]    45            spot: full cone angle
-    ``spot_blend``     float in [0, 1]        0.15          spot
-    ``size``           float or [w, h] > 0    1             area: width (local x), height (y)
-    ``up``             [x, y, z], not         --            area: the light's local +Y (the
-                       parallel to                          height's axis), its rotation about
-                       ``direction``                        ``direction``
-    ``radius``         float >= 0             0             point, spot: soft radius
-    =================  =====================  ============  =====================================
-
-    Stored: ``direction`` is a unit vector, ``spot_size`` is in radians, ``size`` a
-    pair, ``up`` a unit vector perpendicular to ``direction`` (or None). An area light's
-    local frame has -Z along ``direction`` and +Y along ``up``; without ``up`` it is the
-    shortest-arc rotation taking -Z to ``direction``
-    (:func:`relray.core.shapes.frame_towards`).
-    """
-
-    type: str
-    position: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(3)))
-    direction: np.ndarray = field(default_factory=lambda: _frozen(np.array([0.0, 0.0, -1.0])))
-    color: np.ndarray = field(default_factory=lambda: _frozen(np.ones(3)))
-    power: float = 1000.0
-    spot_size: float = math.radians(45.0)
-    spot_blend: float = 0.15
-    size: tuple[float, float] = (1.0, 1.0)
-    radius: float = 0.0
-    name: str = ""
-    up: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class SceneSpec:
-    """The ``[scene]`` table plus the materials, objects and lights (includes merged)."""
-
-    file: Path | None
-    background: tuple[float, float, float]
-    materials: tuple[MaterialSpec, ...]
-    objects: tuple[ObjectSpec, ...]
-    lights: tuple[LightSpec, ...]
-    includes: tuple[Path, ...] = ()
-
-
-@dataclass(frozen=True)
-class Job:
-    """A validated render job. ``camera`` is None only when the glTF file has one."""
-
-    path: Path
-    render: RenderSettings
-    output: OutputSettings
-    camera: CameraSettings | None
-    motion: MotionSettings
-    scene: SceneSpec
-
-
 # ------------------------------------------------------------------ value checking
-
-
-def _frozen(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, dtype=np.float64)
-    a.setflags(write=False)
-    return a
 
 
 @dataclass(frozen=True)
@@ -758,8 +558,8 @@ def _parse_camera(t: dict[str, Any], ctx: _Ctx) -> CameraSettings:
     fov = _get_float(t, ctx, "fov", DEFAULT_FOV, 0.0, 180.0, lo_open=True, hi_open=True)
     shift = _get_vec(t, ctx, "shift", (0.0, 0.0), n=2, lo=-10.0, hi=10.0)
     return CameraSettings(
-        position=_frozen(position),
-        rotation=_frozen(rotation),
+        position=frozen(position),
+        rotation=frozen(rotation),
         fov=fov,
         shift=(float(shift[0]), float(shift[1])),
     )
@@ -805,7 +605,7 @@ def _parse_keyframes(value: Any, ctx: _Ctx) -> tuple[tuple[int, np.ndarray], ...
                 "frame", f"keyframes must be sorted by frame, without repeats "
                 f"(frame {frame} follows frame {keys[-1][0]})",
             )
-        keys.append((frame, _frozen(beta)))
+        keys.append((frame, frozen(beta)))
     return tuple(keys)
 
 
@@ -823,10 +623,10 @@ def _parse_motion_table(t: dict[str, Any], ctx: _Ctx) -> MotionSettings:
         if keyframes:
             raise ctx.error("proper_acceleration", "give keyframes or proper_acceleration, "
                             "not both")
-        accel = _frozen(_vector(t["proper_acceleration"], ctx, "proper_acceleration", 3))
+        accel = frozen(_vector(t["proper_acceleration"], ctx, "proper_acceleration", 3))
     motion = MotionSettings(
         mode=mode,
-        beta=_frozen(beta),
+        beta=frozen(beta),
         ct=_get_float(t, ctx, "ct", 0.0),
         frames=frames,
         ct_per_frame=_get_float(t, ctx, "ct_per_frame", 0.0, 0.0),
@@ -960,7 +760,7 @@ def _parse_object(
         raise ctx.error("velocity", "objects with their own velocity are not supported yet")
     params = _SHAPE_PARSERS[shape](t, ctx, job_dir)
     return ObjectSpec(name=name, shape=shape, material=material, params=params,
-                      velocity=_frozen(velocity))
+                      velocity=frozen(velocity))
 
 
 def _positive_size(value: Any, ctx: _Ctx, name: str) -> np.ndarray:
@@ -972,7 +772,7 @@ def _positive_size(value: Any, ctx: _Ctx, name: str) -> np.ndarray:
 
 def _sphere_params(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> dict[str, Any]:
     return {
-        "center": _frozen(_vector(t["center"], ctx, "center", 3)),
+        "center": frozen(_vector(t["center"], ctx, "center", 3)),
         "radius": _get_float(t, ctx, "radius", 1.0, 0.0, lo_open=True),
         "subdivisions": _get_int(t, ctx, "subdivisions", shapes.DEFAULT_SUBDIVISIONS, 0,
                                  shapes.MAX_SUBDIVISIONS),
@@ -981,8 +781,8 @@ def _sphere_params(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> dict[str, Any
 
 def _box_params(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> dict[str, Any]:
     return {
-        "center": _frozen(_vector(t["center"], ctx, "center", 3)),
-        "size": _frozen(_positive_size(t["size"], ctx, "size")),
+        "center": frozen(_vector(t["center"], ctx, "center", 3)),
+        "size": frozen(_positive_size(t["size"], ctx, "size")),
         "rotation_z": _get_float(t, ctx, "rotation_z", 0.0),
     }
 
@@ -992,7 +792,7 @@ def _quad_params(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> dict[str, Any]:
     problem = shapes.quad_problem(corners)
     if problem:
         raise ctx.error("corners", problem)
-    return {"corners": _frozen(corners)}
+    return {"corners": frozen(corners)}
 
 
 def _mesh_params(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> dict[str, Any]:
@@ -1003,8 +803,8 @@ def _mesh_params(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> dict[str, Any]:
                         ".ply, .obj and .stl")
     return {
         "file": file,
-        "translate": _frozen(_get_vec(t, ctx, "translate", (0.0, 0.0, 0.0))),
-        "scale": _frozen(_positive_size(t.get("scale", 1.0), ctx, "scale")),
+        "translate": frozen(_get_vec(t, ctx, "translate", (0.0, 0.0, 0.0))),
+        "scale": frozen(_positive_size(t.get("scale", 1.0), ctx, "scale")),
         "rotation_z": _get_float(t, ctx, "rotation_z", 0.0),
         "up": _get_str(t, ctx, "up", "y" if is_gltf else "z", ("z", "y")),
         "smooth": _get_bool(t, ctx, "smooth", False),
@@ -1057,9 +857,9 @@ def _parse_light(t: dict[str, Any], ctx: _Ctx) -> LightSpec:
     up = _light_up(t, ctx, direction / norm) if "up" in t else None
     return LightSpec(
         type=kind,
-        position=_frozen(_get_vec(t, ctx, "position", (0.0, 0.0, 0.0))),
-        direction=_frozen(direction / norm),
-        color=_frozen(_get_vec(t, ctx, "color", (1.0, 1.0, 1.0), lo=0.0)),
+        position=frozen(_get_vec(t, ctx, "position", (0.0, 0.0, 0.0))),
+        direction=frozen(direction / norm),
+        color=frozen(_get_vec(t, ctx, "color", (1.0, 1.0, 1.0), lo=0.0)),
         power=_get_float(t, ctx, "power", 1.0 if kind == "sun" else 1000.0, 0.0),
         spot_size=math.radians(_get_float(t, ctx, "spot_size", 45.0, 0.0, 180.0, lo_open=True)),
         spot_blend=_get_float(t, ctx, "spot_blend", 0.15, 0.0, 1.0),
@@ -1085,7 +885,7 @@ def _light_up(t: Mapping[str, Any], ctx: _Ctx, direction: np.ndarray) -> np.ndar
     if sine < MIN_UP_SINE:
         raise ctx.error("up", "is parallel to direction: it must give the light's rotation "
                         "about its direction (its local +Y)")
-    return _frozen(perp / sine)
+    return frozen(perp / sine)
 
 
 def material_from_dict(d: Mapping[str, Any], key_prefix: str = "",
@@ -1309,8 +1109,6 @@ def _check_memory(render: RenderSettings, output: OutputSettings, ctx: _Ctx) -> 
 
 
 def _gltf_has_camera(file: Path, job_path: Path) -> bool:
-    from . import gltf  # gltf imports this module's specs
-
     return gltf.find_camera(file, job_file=job_path) is not None
 
 
@@ -1360,7 +1158,7 @@ def with_overrides(
     if beta is not None:
         b = _vector(beta, ctx, "--beta", 3)
         _check_speed(b, ctx, "--beta")
-        motion = replace(motion, beta=_frozen(b), keyframes=())
+        motion = replace(motion, beta=frozen(b), keyframes=())
     if ct is not None:
         motion = replace(motion, ct=_number(ct, ctx, "--ct"))
     if frames is not None:
@@ -1377,20 +1175,8 @@ def with_overrides(
     return replace(job, render=render, motion=motion, output=output)
 
 
-def frame_list(job: Job) -> list[int]:
-    """The frames to render, first to last inclusive (``--frames`` or motion.frames)."""
-    first, last = job.motion.render_frames or job.motion.frames
-    return list(range(first, last + 1))
 
 
-def beta_at_frame(job: Job, frame: int) -> np.ndarray:
-    """Camera beta at ``frame``: keyframes linear in frame (held outside), else motion.beta."""
-    keys = job.motion.keyframes
-    if not keys:
-        return np.array(job.motion.beta, dtype=np.float64)
-    at = np.array([f for f, _ in keys], dtype=np.float64)
-    betas = np.stack([b for _, b in keys])
-    return np.array([np.interp(frame, at, betas[:, k]) for k in range(3)])
 
 
 def _fmt_vec(v: Iterable[float]) -> str:

@@ -1,0 +1,242 @@
+"""The scene description: the in-memory contract between whoever describes a scene and
+the renderer.
+
+The TOML job (:mod:`.job`), the glTF importer (:mod:`.gltf`) and the Blender add-on's
+exporter all produce these frozen dataclasses; :mod:`.geometry` and the renderer consume
+them. Nothing here parses or validates: the values are already checked and resolved
+(absolute paths, unit vectors, rotation matrices, radians where the docstring says so).
+
+Frames: every position, direction and β is in the lab frame S (the frame in which
+static objects are at rest), except where a docstring says "camera frame".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..physics.spectrum import MODES as SPECTRAL_MODES
+
+OUTPUT_FORMATS = ("exr", "png", "spectral-exr")
+AOV_NAMES = ("depth", "doppler", "lab_time")
+MOTION_MODES = ("snapshot", "worldline")
+SHAPES = ("sphere", "box", "quad", "mesh")
+LIGHT_TYPES = ("point", "spot", "sun", "area")
+
+__all__ = ["SPECTRAL_MODES", "OUTPUT_FORMATS", "AOV_NAMES", "MOTION_MODES", "SHAPES",
+           "LIGHT_TYPES", "frozen", "RenderSettings", "OutputSettings", "CameraSettings",
+           "MotionSettings", "MaterialSpec", "ObjectSpec", "LightSpec", "SceneSpec", "Job"]
+
+
+def frozen(a: Any) -> np.ndarray:
+    """A read-only float64 copy of ``a`` (the vectors and matrices of the description)."""
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """The ``[render]`` table."""
+
+    width: int = 256
+    height: int = 256
+    spp: int = 64
+    noise_threshold: float = 0.0
+    max_depth: int = 8
+    seed: int = 0
+    spectral: str = "cie1931"
+    doppler: bool = True
+    searchlight: bool = True
+    threads: int = 0
+    transparent: bool = False
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """The ``[output]`` table. ``dir`` is absolute."""
+
+    dir: Path
+    name: str = "frame_{frame:04d}"
+    formats: tuple[str, ...] = ("exr", "png")
+    spectral_bands: tuple[float, float, float] = (380.0, 780.0, 10.0)
+    aovs: tuple[str, ...] = ("depth", "doppler", "lab_time")
+    exposure: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class CameraSettings:
+    """The ``[camera]`` table, resolved to a position and a camera-to-world rotation.
+
+    ``rotation`` (3, 3): columns are the camera's right, up and backward axes in the
+    camera's rest frame (numerically the lab axes: the boost is pure). The camera looks
+    along ``-rotation[:, 2]``. ``fov`` is the vertical full angle in degrees.
+    """
+
+    position: np.ndarray
+    rotation: np.ndarray
+    fov: float = 39.6
+    shift: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def forward(self) -> np.ndarray:
+        return -self.rotation[:, 2]
+
+
+@dataclass(frozen=True, eq=False)
+class MotionSettings:
+    """The ``[motion]`` table. ``keyframes`` are (frame, beta) sorted by frame."""
+
+    mode: str = "snapshot"
+    beta: np.ndarray = field(default_factory=lambda: frozen(np.zeros(3)))
+    ct: float = 0.0
+    frames: tuple[int, int] = (1, 1)
+    ct_per_frame: float = 0.0
+    keyframes: tuple[tuple[int, np.ndarray], ...] = ()
+    proper_acceleration: np.ndarray | None = None
+    render_frames: tuple[int, int] | None = None  # --frames: a sub-range to render
+
+
+@dataclass(frozen=True)
+class MaterialSpec:
+    """One ``[[materials]]`` entry (Principled-BSDF-like, colours linear Rec.709).
+
+    ========================  =========================  =======  ===============================
+    key                       type                       default  meaning
+    ========================  =========================  =======  ===============================
+    ``name``                  str, *required*, unique
+    ``base_color``            [r, g, b] in [0, 1]        0.8 grey  as Blender's default material
+    ``roughness``             float in [0, 1]            0.5
+    ``metallic``              float in [0, 1]            0.0
+    ``transmission``          float in [0, 1]            0.0
+    ``ior``                   float >= 1                 1.5
+    ``emission``              [r, g, b] >= 0             0 0 0    times ``emission_strength``
+    ``emission_strength``     float >= 0                 0.0      radiance scale
+    ``emission_blackbody``    float > 0 (K)              --       Planck spectrum instead of RGB
+    ``emission_line``         [centre, sigma] nm > 0     --       Gaussian line (tests)
+    ``emission_spectrum``     {nm = [..], values = [..]}  --      tabulated, nm increasing
+    ``reflectance_uv``        float in [0, 1]            --       reflectance below the visible
+    ``reflectance_ir``        float in [0, 1]            --       reflectance above the visible
+    ``one_sided_emission``    bool                       false    emit only on the front face,
+                                                                  normal (v1-v0)×(v2-v0)
+    ========================  =========================  =======  ===============================
+
+    At most one of ``emission_blackbody``, ``emission_line`` and ``emission_spectrum``.
+    """
+
+    name: str
+    base_color: tuple[float, float, float] = (0.8, 0.8, 0.8)
+    roughness: float = 0.5
+    metallic: float = 0.0
+    transmission: float = 0.0
+    ior: float = 1.5
+    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    emission_strength: float = 0.0
+    emission_blackbody: float | None = None
+    emission_line: tuple[float, float] | None = None
+    emission_spectrum: tuple[tuple[float, ...], tuple[float, ...]] | None = None
+    reflectance_uv: float | None = None
+    reflectance_ir: float | None = None
+    one_sided_emission: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectSpec:
+    """One ``[[objects]]`` entry.
+
+    Common keys: ``name`` (str, default "objects[i]"), ``shape`` (*required*),
+    ``material`` (*required*, a material name), ``velocity`` ([vx, vy, vz], must be 0
+    for now). ``params`` holds the shape's validated parameters:
+
+    ==========  ===========================================================================
+    shape       params (*required* first)
+    ==========  ===========================================================================
+    sphere      ``center`` (3,), ``radius`` > 0; ``subdivisions`` int 0..8 (default 5)
+    box         ``center`` (3,), ``size`` scalar or (3,) > 0 (stored (3,));
+                ``rotation_z`` degrees (0)
+    quad        ``corners`` (4, 3): planar, convex, in order around the quad
+    mesh        ``file`` (.ply/.obj/.stl/.glb/.gltf, relative to the job; stored absolute);
+                ``translate`` (3,) (0), ``scale`` scalar or (3,) > 0 (stored (3,), 1),
+                ``rotation_z`` degrees (0), ``up`` "z" | "y" (the file's up axis; "y" is
+                turned to z as Blender does: default "y" for glTF, "z" otherwise),
+                ``smooth`` bool (false; .ply/.obj/.stl only: vertex normals by trimesh)
+    ==========  ===========================================================================
+
+    The mesh transform is v -> Rz(rotation_z) · (scale ⊙ v) + translate.
+    """
+
+    name: str
+    shape: str
+    material: str
+    params: dict[str, Any]
+    velocity: np.ndarray = field(default_factory=lambda: frozen(np.zeros(3)))
+
+
+@dataclass(frozen=True, eq=False)
+class LightSpec:
+    """One ``[[lights]]`` entry (Blender light semantics).
+
+    =================  =====================  ============  =====================================
+    key                type                   default       applies to
+    =================  =====================  ============  =====================================
+    ``type``           str, *required*                      "point" | "spot" | "sun" | "area"
+    ``name``           str                    ""            all
+    ``position``       [x, y, z]              [0, 0, 0]     all (unused by sun)
+    ``direction``      [x, y, z] != 0         [0, 0, -1]    spot, sun, area: where light goes
+    ``color``          [r, g, b] >= 0         [1, 1, 1]     all
+    ``power``          float >= 0             1000 (sun 1)  W; sun: irradiance W/m²
+    ``spot_size``      degrees in (0, 180]    45            spot: full cone angle
+    ``spot_blend``     float in [0, 1]        0.15          spot
+    ``size``           float or [w, h] > 0    1             area: width (local x), height (y)
+    ``up``             [x, y, z], not         --            area: the light's local +Y (the
+                       parallel to                          height's axis), its rotation about
+                       ``direction``                        ``direction``
+    ``radius``         float >= 0             0             point, spot: soft radius
+    =================  =====================  ============  =====================================
+
+    Stored: ``direction`` is a unit vector, ``spot_size`` is in radians, ``size`` a
+    pair, ``up`` a unit vector perpendicular to ``direction`` (or None). An area light's
+    local frame has -Z along ``direction`` and +Y along ``up``; without ``up`` it is the
+    shortest-arc rotation taking -Z to ``direction``
+    (:func:`relray.core.shapes.frame_towards`).
+    """
+
+    type: str
+    position: np.ndarray = field(default_factory=lambda: frozen(np.zeros(3)))
+    direction: np.ndarray = field(default_factory=lambda: frozen(np.array([0.0, 0.0, -1.0])))
+    color: np.ndarray = field(default_factory=lambda: frozen(np.ones(3)))
+    power: float = 1000.0
+    spot_size: float = math.radians(45.0)
+    spot_blend: float = 0.15
+    size: tuple[float, float] = (1.0, 1.0)
+    radius: float = 0.0
+    name: str = ""
+    up: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """The ``[scene]`` table plus the materials, objects and lights (includes merged)."""
+
+    file: Path | None
+    background: tuple[float, float, float]
+    materials: tuple[MaterialSpec, ...]
+    objects: tuple[ObjectSpec, ...]
+    lights: tuple[LightSpec, ...]
+    includes: tuple[Path, ...] = ()
+
+
+@dataclass(frozen=True)
+class Job:
+    """A validated render job. ``camera`` is None only when the glTF file has one."""
+
+    path: Path
+    render: RenderSettings
+    output: OutputSettings
+    camera: CameraSettings | None
+    motion: MotionSettings
+    scene: SceneSpec
