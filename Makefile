@@ -3,16 +3,33 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
+PIP    := $(BIN)/python -m pip --disable-pip-version-check
+UV     := uv==0.13.9
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 
-.PHONY: venv demo test lint stress bench bench-quick clean gallery extension test-blender
+.PHONY: venv lock demo test lint stress bench bench-quick clean gallery extension test-blender
 
-$(STAMP): pyproject.toml
+## the venv: exactly the versions (and file hashes) of requirements.lock, then relray
+## itself as an editable install without dependencies
+$(STAMP): pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e ".[dev]"
+	$(PIP) install --quiet --require-hashes --no-deps -r requirements.lock
+	$(PIP) install --quiet --no-deps --no-build-isolation -e .
+	$(PIP) check
 	touch $(STAMP)
 
 venv: $(STAMP)
+
+## make lock: resolve pyproject.toml (+ the dev extra and the build tools) into
+## requirements.lock, with hashes, for CPython 3.11 on x86-64 Linux (uv, pinned, in a
+## throw-away venv).  Pins already in the lock stay unless `make lock UPGRADE=1`.
+## Commit the result; `make venv` then installs exactly that everywhere.
+lock:
+	rm -rf .cache/lock-venv && $(PYTHON) -m venv .cache/lock-venv
+	.cache/lock-venv/bin/python -m pip install --quiet --disable-pip-version-check "$(UV)"
+	.cache/lock-venv/bin/uv pip compile pyproject.toml requirements-build.in --extra dev \
+		--python-version 3.11 --python-platform x86_64-manylinux_2_28 --generate-hashes \
+		$(if $(UPGRADE),--upgrade) --custom-compile-command "make lock" -o requirements.lock
 
 ## make demo: render the default fly-by into out/flyby and a contact sheet
 demo: $(STAMP)

@@ -8,10 +8,10 @@ provides Blender's own extension CLI, ``bl_pkg.bl_extension_cli``, from
     python relblend/packaging.py build DIR                    # split-platform zips + validate
     python relblend/packaging.py build-test-zip FILE          # one zip without wheels (tests)
 
-Wheels: :data:`WHEEL_PINS` are the core's runtime dependencies (and theirs), pinned to
-the versions the project tests with, for CPython 3.11 (Blender 4.2–5.0) on each of
-:data:`PLATFORMS`. numpy (Blender ships it) and bpy are not bundled; pygltflib is not
-either, because the core does not import it. They are downloaded with pip (binary
+Wheels: :data:`WHEEL_PACKAGES` are the core's runtime dependencies (and theirs), at the
+versions of ``requirements.lock`` (what the project tests with), for CPython 3.11
+(Blender 4.2–5.0) on each of :data:`PLATFORMS`. numpy (Blender ships it) and bpy are
+not bundled. They are downloaded with pip (binary
 wheels only, no dependency resolution: the list is complete) into
 ``~/.cache/relray/wheels/<platform>/`` and copied to ``dist/wheels/``. The manifest
 lists them by file name between ``# BEGIN WHEELS`` and ``# END WHEELS``;
@@ -39,20 +39,25 @@ WHEEL_DIR = ROOT / "dist" / "wheels"
 CACHE = Path(os.environ.get("RELRAY_CACHE", Path.home() / ".cache" / "relray")) / "wheels"
 PYTHON_VERSION = "3.11"
 
-#: The core's runtime dependencies and theirs (numpy excluded: Blender ships it).
-WHEEL_PINS = [
-    "numba==0.68.1",
-    "llvmlite==0.50.0",
-    "embreex==4.4.0.post1",
-    "colour-science==0.4.6",
-    "scipy==1.17.1",
-    "imageio==2.38.1",
-    "pillow==13.0.0",
-    "typing_extensions==4.16.0",
-    "OpenImageIO==3.0.21.0",
-    "trimesh==5.2.0",
-    "tqdm==4.70.1",
-]
+#: The core's runtime dependencies and theirs (numpy excluded: Blender ships it), at the
+#: versions of ``requirements.lock`` (:func:`wheel_pins`), so the extension bundles exactly
+#: what the tests ran with.
+WHEEL_PACKAGES = ["numba", "llvmlite", "embreex", "colour-science", "scipy", "imageio",
+                  "pillow", "typing_extensions", "OpenImageIO", "trimesh", "tqdm"]
+LOCK = ROOT / "requirements.lock"
+
+
+def wheel_pins(lock_text: str | None = None) -> list[str]:
+    """``name==version`` of every :data:`WHEEL_PACKAGES` entry, read from the lock."""
+    text = LOCK.read_text(encoding="utf-8") if lock_text is None else lock_text
+    versions = {_project(m.group(1)): m.group(2)
+                for m in re.finditer(r"^([A-Za-z0-9_.\-]+)==(\S+)", text, re.M)}
+    missing = [p for p in WHEEL_PACKAGES if _project(p) not in versions]
+    if missing:
+        fail(f"{LOCK.name} does not pin {missing}: run 'make lock'")
+    return [f"{p}=={versions[_project(p)]}" for p in WHEEL_PACKAGES]
+
+
 #: Extra wheels of one platform only (environment markers of the pins above).
 PLATFORM_EXTRAS = {"windows-x64": ["colorama==0.4.6"]}
 #: Blender platform -> pip platform tags (newest first is not required: pip picks).
@@ -75,7 +80,7 @@ def download_wheels() -> list[Path]:
     for platform, tags in PLATFORMS.items():
         dest = CACHE / platform
         dest.mkdir(parents=True, exist_ok=True)
-        pins = WHEEL_PINS + PLATFORM_EXTRAS.get(platform, [])
+        pins = wheel_pins() + PLATFORM_EXTRAS.get(platform, [])
         cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
                "--only-binary=:all:", "--python-version", PYTHON_VERSION,
                "--implementation", "cp", "--abi", "cp311", "--abi", "abi3", "--abi", "none",
