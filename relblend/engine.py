@@ -33,12 +33,12 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-#: Passes: name -> (channels, channel ids, type).
+#: Passes: name -> (channels, channel ids, type, the core's AOV or None for Combined).
 PASSES = {
-    "Combined": (4, "RGBA", "COLOR"),
-    "Depth": (1, "Z", "VALUE"),
-    "Doppler": (1, "D", "VALUE"),
-    "LabTime": (1, "T", "VALUE"),
+    "Combined": (4, "RGBA", "COLOR", None),
+    "Depth": (1, "Z", "VALUE", "depth"),
+    "Doppler": (1, "D", "VALUE", "doppler"),
+    "LabTime": (1, "T", "VALUE", "lab_time"),
 }
 #: Seconds between test_break / progress polls while the core renders.
 POLL_SECONDS = 0.1
@@ -99,7 +99,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
     # ------------------------------------------------------------------ passes
     def update_render_passes(self, scene=None, renderlayer=None):
         for name in enabled_passes(renderlayer):
-            channels, chan_id, kind = PASSES[name]
+            channels, chan_id, kind, _ = PASSES[name]
             self.register_pass(scene, renderlayer, name, channels, chan_id, kind)
 
     # ------------------------------------------------------------------ render
@@ -146,9 +146,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
             raise export.ExportError(f"the active camera '{cam.name}' is not a camera object")
         settings = cam_eval.data.relray
         m = export.matrix_np(cam_eval.matrix_world)
-        beta = motion.check_speed(
-            motion.beta_lab(motion.VelocitySettings.from_rna(settings),
-                            motion.unit_rotation(m[:3, :3])), frame)
+        beta = motion.camera_beta(settings, m, frame)
         position = m[:3, 3].copy()
         if settings.mode == "WORLDLINE":
             betas, clock = self._worldline_history(depsgraph, cam, frame)
@@ -158,7 +156,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
             event = motion.snapshot_event(position, beta, float(settings.ct), frame)
         exported = export.export_scene(depsgraph, cam, self.resolution_x, self.resolution_y,
                                        test_break=self.test_break)
-        return FrameSetup(frame, event, exported, motion.gamma_of(event.beta))
+        return FrameSetup(frame, event, exported, motion.gamma_or_zero(event.beta))
 
     def _worldline_history(self, depsgraph, cam, frame: int):
         """β (lab) of frames min(start, frame) .. frame - 1, and the worldline clock."""
@@ -181,9 +179,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
                     cam_eval = cam.evaluated_get(depsgraph)
                     m = export.matrix_np(cam_eval.matrix_world)
                     settings = cam_eval.data.relray
-                    history[f] = motion.check_speed(motion.beta_lab(
-                        motion.VelocitySettings.from_rna(settings),
-                        motion.unit_rotation(m[:3, :3])), f)
+                    history[f] = motion.camera_beta(settings, m, f)
                     if f == start:
                         _CLOCK[key] = (float(settings.ct), float(settings.ct_per_frame))
             finally:
@@ -208,8 +204,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
                                   searchlight=rs.searchlight, threads=threads)
         layer = depsgraph.view_layer
         passes = enabled_passes(layer)
-        aovs = tuple(a for p, a in (("Depth", "depth"), ("Doppler", "doppler"),
-                                    ("LabTime", "lab_time")) if p in passes)
+        aovs = tuple(PASSES[p][3] for p in passes if PASSES[p][3] is not None)
         self.update_stats("", f"Frame {setup.frame} | preparing")
         t_prep = time.perf_counter()
         prep = prepared_scene(ex.scene, rs.spectral)
@@ -291,8 +286,9 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         result = self.begin_result(0, 0, w, h)
         layer = result.layers[0]
         layer.passes["Combined"].rect = rgba.reshape(-1, 4)
-        for name, aov in (("Depth", "depth"), ("Doppler", "doppler"), ("LabTime", "lab_time")):
-            if name in passes:
+        for name in passes:
+            aov = PASSES[name][3]
+            if aov is not None:
                 plane = np.array(image.aovs[aov][::-1], np.float32).reshape(-1, 1)
                 layer.passes[name].rect = plane
         self.end_result(result)

@@ -90,8 +90,7 @@ def sample_camera(context, cam, frames: range) -> list[FrameSample]:
             cam_eval = cam.evaluated_get(depsgraph)
             m = export.matrix_np(cam_eval.matrix_world)
             s = cam_eval.data.relray
-            beta = motion.check_speed(motion.beta_lab(
-                motion.VelocitySettings.from_rna(s), motion.unit_rotation(m[:3, :3])), f)
+            beta = motion.camera_beta(s, m, f)
             out.append(FrameSample(f, beta, float(s.ct), float(s.ct_per_frame), m))
     finally:
         scene.frame_set(current, subframe=subframe)

@@ -92,10 +92,22 @@ def check_speed(beta: np.ndarray, frame: int) -> np.ndarray:
     return beta
 
 
-def gamma_of(beta: np.ndarray) -> float:
-    """Lorentz factor of a valid β."""
-    b = float(np.linalg.norm(beta))
-    return 1.0 / math.sqrt((1.0 - b) * (1.0 + b))
+def camera_beta(settings, matrix_world: np.ndarray, frame: int | None = None) -> np.ndarray:
+    """β in lab axes of a camera object: its Relativity ``settings`` (evaluated RNA or
+    :class:`VelocitySettings`), turned by the rotation of ``matrix_world`` (4, 4) when the
+    axes are the camera's. With ``frame``, checked below c (:func:`check_speed`)."""
+    v = settings if isinstance(settings, VelocitySettings) else VelocitySettings.from_rna(settings)
+    beta = beta_lab(v, unit_rotation(np.asarray(matrix_world, np.float64)[:3, :3]))
+    return beta if frame is None else check_speed(beta, frame)
+
+
+def gamma_or_zero(beta: np.ndarray | float) -> float:
+    """γ of β (:func:`relativity.gamma`), or 0 where |β| ≥ 1 or β is not finite (a value
+    the UI shows as invalid instead of raising)."""
+    try:
+        return float(relativity.gamma(beta))
+    except ValueError:
+        return 0.0
 
 
 def unit_rotation(matrix3: np.ndarray) -> np.ndarray:

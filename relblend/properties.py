@@ -40,8 +40,6 @@ package): the Dask scheduler address of "Render on Farm" (empty: this machine), 
 connect timeout, and the folder the job is exported to.
 """
 
-import math
-
 import bpy
 from bpy.props import (
     BoolProperty,
@@ -59,13 +57,11 @@ BETA_SOFT_MAX = 0.99
 
 
 def _gamma_get(self) -> float:
-    """γ = 1/sqrt((1-b)(1+b)) of the stored β (0 when |β| >= 1: invalid)."""
-    b = self.speed if self.velocity_input == "SPEED" else math.sqrt(sum(x * x for x in self.beta))
-    if self.velocity_input == "SPEED" and not any(self.direction):
-        b = 0.0
-    if b >= 1.0:
-        return 0.0
-    return 1.0 / math.sqrt((1.0 - b) * (1.0 + b))
+    """γ of the stored β (0 when |β| >= 1: invalid); the core's formula, through
+    :mod:`.motion` (imported on first draw: it loads the core)."""
+    from .motion import VelocitySettings, beta_local, gamma_or_zero
+
+    return gamma_or_zero(beta_local(VelocitySettings.from_rna(self)))
 
 
 class RelrayCameraSettings(bpy.types.PropertyGroup):

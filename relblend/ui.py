@@ -73,8 +73,7 @@ def view_readout(context, cam_data) -> str:
         if obj is None:
             return "D range: the camera is not used by an object"
         m = export.matrix_np(obj.matrix_world)
-        beta = motion.beta_lab(motion.VelocitySettings.from_rna(cam_data.relray),
-                               motion.unit_rotation(m[:3, :3]))
+        beta = motion.camera_beta(cam_data.relray, m)
         speed = float((beta @ beta) ** 0.5)
         if speed >= 1.0:
             return f"|β| = {speed:.4g} ≥ 1: not renderable"
