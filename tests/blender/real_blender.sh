@@ -25,9 +25,10 @@ SUITE=trixie
 # Debian packages inside the chroot.  python3-scipy, -pil and -typing-extensions are the
 # numpy-2 builds of colour-science's dependencies (Debian's, to match its numpy 2.2).
 APT_PACKAGES="blender python3-numpy python3-pytest python3-scipy python3-pil python3-typing-extensions"
-# The core's compiled dependencies as cp313 manylinux wheels from PyPI, the same versions
-# as in .venv (numba <2.6 and embreex accept numpy 2.2); pure-Python ones without deps.
-PIP_PACKAGES="numba llvmlite embreex colour-science imageio trimesh OpenImageIO"
+# The extension's bundled packages (relblend/packaging.py's WHEEL_PACKAGES) as cp313
+# manylinux wheels from PyPI, the same versions as in .venv, i.e. requirements.lock (numba
+# and embreex accept numpy 2.2), except those Debian provides above as numpy-2 builds.
+DEBIAN_PROVIDED="scipy pillow typing_extensions"
 CHROOT_RECIPE="v1 $SUITE $APT_PACKAGES"
 
 say() { echo "test-blender: $*"; }
@@ -139,8 +140,11 @@ build_chroot() {
 install_wheels() {
     # The same versions as .venv has, as cp313 wheels (none of these is in Debian trixie
     # at a version we pin).  pip installs for the chroot's Python from outside it.
-    local pins="" p v
-    for p in $PIP_PACKAGES; do
+    local pins="" p v packages
+    packages=$("$PYBIN" -c 'import sys; from relray.relblend.packaging import WHEEL_PACKAGES
+print(" ".join(p for p in WHEEL_PACKAGES if p not in sys.argv[1:]))' $DEBIAN_PROVIDED) \
+        || die "could not read WHEEL_PACKAGES from relblend/packaging.py"
+    for p in $packages; do
         v=$("$PYBIN" -m pip show "$p" 2>/dev/null | awk '/^Version:/ {print $2}')
         [ -n "$v" ] || die "$p is not installed in .venv (run 'make venv')"
         pins="$pins $p==$v"
