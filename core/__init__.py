@@ -4,6 +4,8 @@ Packages follow the data flow, and each imports only those before it (the layeri
 ``tests/test_layout.py`` enforces, with no import cycle anywhere)::
 
     errors                     UserError: one line naming the key and the file
+    files                      reading input files: regular files only, bounded, no hang
+    resources                  memory limit (physical, cgroup, rlimit), thread cap
     physics/    relativity, spectrum, sigmoid, cie_tables
     scene/      description ◄── job (TOML), gltf, shapes;  geometry, motion
     render/     camera, accel, sampling, bsdf, lights, materials, integrator, film, frames

@@ -25,7 +25,7 @@ from test_farm import (
     write_job,
 )
 
-from relray.core import cli, farm
+from relray.core import cli, farm, resources
 from relray.core.runner import render_job
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -110,7 +110,7 @@ def test_flyby_24_frames_on_a_separate_scheduler_and_2_workers(tmp_path, dask_cl
         c.wait_for_workers(2, timeout=60)
         slots = farm.host_slots(c)
         env = c.run(lambda: (os.environ.get("OPENBLAS_NUM_THREADS"),
-                             os.environ.get("OMP_NUM_THREADS"), farm.available_cores()))
+                             os.environ.get("OMP_NUM_THREADS"), resources.usable_cores()))
         threads = {w: (c.submit(farm.task_threads, 0, None, workers=[w], pure=False).result(),
                        c.submit(farm.task_threads, 0, slots, workers=[w], pure=False).result())
                    for w in env}

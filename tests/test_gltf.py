@@ -354,3 +354,148 @@ def test_job_with_the_gltf_camera_renders(glb: Path, tmp_path: Path) -> None:
     np.testing.assert_allclose(event.x, cam.position + np.array([0.5, 0, 0]) / math.sqrt(0.75))
     assert cli.main(["render", str(tmp_path / "job.toml"), "--quiet"]) == 0
     assert (tmp_path / "out" / "frame_0001.exr").is_file()
+
+
+# ----------------------------------------------------------------- hostile documents
+# Hand-written .gltf JSON (data-URI buffer), each broken in one way an attacker or a
+# buggy exporter would: every case is one UserError naming scene.file, fast.
+
+def tri_doc(n_nodes: int = 1) -> dict:
+    """One triangle (3 float32 vertices, 36 bytes) in a data URI, one node per mesh use."""
+    import base64
+
+    data = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32).tobytes()
+    return {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": 36, "uri": "data:application/octet-stream;base64,"
+                     + base64.b64encode(data).decode()}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "nodes": [{"mesh": 0} for _ in range(n_nodes)],
+        "scenes": [{"nodes": list(range(n_nodes))}],
+    }
+
+
+def load_doc(tmp_path: Path, doc: dict | str) -> tuple:
+    import json
+
+    path = tmp_path / "s.gltf"
+    path.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    return gltf.load_gltf(path, job_file=tmp_path / "job.toml")
+
+
+def test_hand_written_document_loads(tmp_path: Path) -> None:
+    """The base of the hostile cases is valid (so each case below fails for its own fault)."""
+    triangles, *_ = load_doc(tmp_path, tri_doc())
+    assert triangles.shape == (1, 3, 3)
+
+
+def test_shared_children_dag_is_refused_quickly(tmp_path: Path) -> None:
+    """40 levels of two nodes each pointing at both nodes of the next level: 2^40 paths
+    if walked naively. glTF requires a forest, so the shared child is refused, at once."""
+    import time
+
+    doc = tri_doc(0)
+    levels = 40
+    nodes = []
+    for lv in range(levels):
+        nxt = [2 * (lv + 1), 2 * (lv + 1) + 1] if lv < levels - 1 else []
+        nodes += [{"children": nxt, "mesh": 0}, {"children": nxt}]
+    doc["nodes"], doc["scenes"] = nodes, [{"nodes": [0, 1]}]
+    t0 = time.perf_counter()
+    with pytest.raises(UserError, match=r"scene\.file.*reached twice.*trees"):
+        load_doc(tmp_path, doc)
+    with pytest.raises(UserError, match="reached twice"):
+        gltf.find_camera(tmp_path / "s.gltf")
+    assert time.perf_counter() - t0 < 10.0  # exponential would be hours; linear is ms
+
+
+@pytest.mark.parametrize("case", [
+    "cycle", "repeated root", "negative child", "float child", "negative mesh index",
+    "negative accessor byteOffset", "negative view byteOffset", "Infinity count",
+    "NaN factor", "huge count digits", "1e400 coordinate", "bool componentType",
+    "bad accessor type", "string byteLength", "sparse count beyond count",
+    "buffer index out of range", "coordinate 1e30", "deep nesting",
+])
+def test_hostile_document_is_one_user_error(tmp_path: Path, case: str) -> None:
+    import base64
+    import json
+
+    doc = tri_doc(2)
+    doc["scenes"] = [{"nodes": [0]}]
+    doc["nodes"][0]["children"] = [1]
+    text = None
+    if case == "cycle":
+        doc["nodes"][1]["children"] = [0]
+    elif case == "repeated root":
+        doc["scenes"] = [{"nodes": [0, 0]}]
+    elif case == "negative child":
+        doc["nodes"][0]["children"] = [-1]
+    elif case == "float child":
+        doc["nodes"][0]["children"] = [1.0]
+    elif case == "negative mesh index":
+        doc["nodes"][0]["mesh"] = -1
+    elif case == "negative accessor byteOffset":
+        doc["bufferViews"][0]["byteOffset"] = 12
+        doc["bufferViews"][0]["byteLength"] = 24
+        doc["accessors"][0]["byteOffset"] = -12
+        doc["accessors"][0]["count"] = 2
+    elif case == "negative view byteOffset":
+        doc["bufferViews"][0]["byteOffset"] = -4
+    elif case == "Infinity count":
+        text = json.dumps(doc).replace('"count": 3', '"count": Infinity')
+    elif case == "NaN factor":
+        doc["materials"] = [{"pbrMetallicRoughness": {"metallicFactor": 0.5}}]
+        doc["meshes"][0]["primitives"][0]["material"] = 0
+        text = json.dumps(doc).replace('"metallicFactor": 0.5', '"metallicFactor": NaN')
+    elif case == "huge count digits":
+        text = json.dumps(doc).replace('"count": 3', '"count": ' + "9" * 5000)
+    elif case == "1e400 coordinate":
+        doc["nodes"][0]["translation"] = [0, 0, 0]
+        text = json.dumps(doc).replace('"translation": [0, 0, 0]', '"translation": [1e400, 0, 0]')
+    elif case == "bool componentType":
+        doc["accessors"][0]["componentType"] = True
+    elif case == "bad accessor type":
+        doc["accessors"][0]["type"] = "VEC7"
+    elif case == "string byteLength":
+        doc["bufferViews"][0]["byteLength"] = "36"
+    elif case == "sparse count beyond count":
+        doc["accessors"][0]["sparse"] = {"count": 4, "indices": {"bufferView": 0,
+                                         "componentType": 5125}, "values": {"bufferView": 0}}
+    elif case == "buffer index out of range":
+        doc["bufferViews"][0]["buffer"] = 1
+    elif case == "coordinate 1e30":
+        data = np.array([[0, 0, 0], [1, 0, 0], [1e30, 1, 0]], np.float32).tobytes()
+        doc["buffers"][0]["uri"] = ("data:application/octet-stream;base64,"
+                                    + base64.b64encode(data).decode())
+    elif case == "deep nesting":
+        text = json.dumps(doc)[:-1] + ', "extras": ' + "[" * 100000 + "]" * 100000 + "}"
+    with pytest.raises(UserError) as err:
+        load_doc(tmp_path, text if text is not None else doc)
+    message = str(err.value)
+    assert err.value.key == "scene.file" and "\n" not in message
+    assert "s.gltf" in message
+
+
+def test_buffer_uri_that_is_a_fifo_is_refused_without_waiting(tmp_path: Path) -> None:
+    import json
+    import os
+
+    doc = tri_doc()
+    doc["buffers"][0]["uri"] = "pipe.bin"
+    os.mkfifo(tmp_path / "pipe.bin")
+    (tmp_path / "s.gltf").write_text(json.dumps(doc))
+    with pytest.raises(UserError, match="buffers\\[0\\].*not a regular file"):
+        gltf.load_gltf(tmp_path / "s.gltf")
+
+
+def test_buffer_uri_that_is_a_device_or_folder_is_refused(tmp_path: Path) -> None:
+    import json
+
+    doc = tri_doc()
+    for uri, why in (("/dev/zero", "not a regular file"), (".", "directory")):
+        doc["buffers"][0]["uri"] = uri
+        (tmp_path / "s.gltf").write_text(json.dumps(doc))
+        with pytest.raises(UserError, match=why):
+            gltf.load_gltf(tmp_path / "s.gltf")

@@ -14,8 +14,8 @@ import pytest
 CORE = Path(__file__).resolve().parents[1] / "core"
 
 #: Layers in data-flow order: a module may import its own layer and the layers before it.
-LAYERS = ["__init__", "errors", "physics", "scene", "render", "output", "progress", "runner",
-          "farm", "cli"]
+LAYERS = ["__init__", "errors", "files", "resources", "physics", "scene", "render", "output",
+          "progress", "runner", "farm", "cli"]
 
 #: Imports allowed inside functions: optional or heavy libraries used by one code path.
 LAZY_IMPORTS = {
@@ -23,6 +23,7 @@ LAZY_IMPORTS = {
     "trimesh": "meshes from .ply/.obj/.stl files, only when a job has one",
     "colour": "colour-science, only to regenerate the embedded CIE tables",
     "numba": "core/__init__: after the BLAS thread pins, before numpy loads",
+    "resource": "the Unix rlimits (the module does not exist on Windows)",
 }
 
 

@@ -182,18 +182,44 @@ def test_corrupt_mesh_is_a_user_error(tmp_path: Path) -> None:
 
 def test_degenerate_triangles_dropped_with_a_count(tmp_path: Path, caplog) -> None:
     (tmp_path / "d.obj").write_text(
-        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv nan 0 0\n"
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv nan 0 0\n"  # vertex 5 is never used
         "f 1 2 3\n"  # fine
         "f 1 2 4\n"  # collinear: zero area
         "f 1 1 3\n"  # repeated vertex
-        "f 5 2 3\n"  # non-finite vertex
     )
     with caplog.at_level(logging.WARNING, logger="relray"):
         s = build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "d.obj"\nmaterial = "m"\n')
     assert s.triangles.shape == (1, 3, 3)
-    assert s.dropped_degenerate == 3
+    assert s.dropped_degenerate == 2
     assert len(s.material_ids) == 1
-    assert "dropped 3 degenerate" in caplog.text
+    assert "dropped 2 degenerate" in caplog.text
+
+
+@pytest.mark.parametrize("bad", ["nan", "inf", "1e30", "-2e15"])
+def test_mesh_coordinates_bounded_like_job_numbers(tmp_path: Path, bad: str) -> None:
+    """One vertex at 1e30 would move the float32 centre and collapse the real geometry:
+    an error naming the object's file key, never a black frame."""
+    (tmp_path / "d.obj").write_text(f"v 0 0 0\nv 1 0 0\nv 0 1 0\nv {bad} 0 0\n"
+                                    "f 1 2 3\nf 1 2 4\n")
+    with pytest.raises(UserError, match="objects\\[0\\].file.*(not finite|beyond)"):
+        build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "d.obj"\nmaterial = "m"\n')
+
+
+def test_mesh_transform_bounded(tmp_path: Path) -> None:
+    (tmp_path / "t.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(UserError, match="objects\\[0\\].*after its transform.*beyond"):
+        build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "t.obj"\nmaterial = "m"\n'
+                        'scale = 1e15\ntranslate = [1e15, 0, 0]\n')
+
+
+def test_an_object_that_vanishes_is_an_error(tmp_path: Path) -> None:
+    """A tiny object beside a huge one collapses to zero area in float32 around the
+    scene's centre: an error naming that object, not a frame without it."""
+    (tmp_path / "t.obj").write_text("v 0 0 0\nv 1e-9 0 0\nv 0 1e-9 0\nf 1 2 3\n")
+    text = ('[[objects]]\nshape = "box"\ncenter = [1e9, 0, 0]\nsize = 1e6\nmaterial = "m"\n'
+            '[[objects]]\nshape = "mesh"\nfile = "t.obj"\nmaterial = "m"\n')
+    with pytest.raises(UserError, match=r"objects\[1\].*all 1 triangles vanish"):
+        build(tmp_path, text)
 
 
 def test_all_degenerate_is_a_user_error(tmp_path: Path) -> None:

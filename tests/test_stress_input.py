@@ -29,7 +29,6 @@ import copy
 import json
 import math
 import os
-import pathlib
 import struct
 import subprocess
 import sys
@@ -44,11 +43,12 @@ from test_cli import TINY
 from test_job import BAD_JOBS, SCENE
 from test_stress_render import assert_finite, render_case
 
-from relray.core import cli
+from relray.core import cli, resources
 from relray.core.errors import UserError
 from relray.core.output.imageio import read_exr
+from relray.core.resources import MemoryLimit
 from relray.core.scene import geometry as scene
-from relray.core.scene import gltf, job
+from relray.core.scene import gltf, job, shapes
 
 pytestmark = pytest.mark.stress
 
@@ -157,7 +157,7 @@ def make_case(tmp_path: Path, files: dict[str, bytes], text: str) -> Path:
 @pytest.mark.parametrize("files, text, key, word, stage", [c[1:] for c in EXTRA_BAD_JOBS],
                          ids=[c[0] for c in EXTRA_BAD_JOBS])
 def test_extra_malformed_jobs(tmp_path, monkeypatch, files, text, key, word, stage):
-    monkeypatch.setattr(job, "physical_memory_bytes", lambda: 16 * 2**30)
+    monkeypatch.setattr(resources, "memory_limit", lambda: MemoryLimit(16 * 2**30, "x"))
     path = make_case(tmp_path, files, text)
     with pytest.raises(UserError) as err:
         j = job.load_job(path)
@@ -271,20 +271,14 @@ def test_unreadable_file_simulated(tmp_path, monkeypatch, what):
     path = write(tmp_path, text)
     if what != "job":
         target.write_bytes(b"glTF")
-    real_open, real_read = pathlib.Path.open, pathlib.Path.read_bytes
+    real_open = os.open
 
-    def deny(self, *a, **k):
-        if Path(self).resolve() == target.resolve():
-            raise PermissionError(13, "Permission denied", str(self))
-        return real_open(self, *a, **k)
+    def deny(file, *a, **k):  # every input file is opened through relray.core.files
+        if Path(file).resolve() == target.resolve():
+            raise PermissionError(13, "Permission denied", str(file))
+        return real_open(file, *a, **k)
 
-    def deny_read(self):
-        if Path(self).resolve() == target.resolve():
-            raise PermissionError(13, "Permission denied", str(self))
-        return real_read(self)
-
-    monkeypatch.setattr(pathlib.Path, "open", deny)
-    monkeypatch.setattr(pathlib.Path, "read_bytes", deny_read)
+    monkeypatch.setattr(os, "open", deny)
     with pytest.raises(UserError) as err:
         job.load_job(path)
     key = {"mesh": "objects[0].file", "scene": "scene.file", "job": None}[what]
@@ -297,15 +291,16 @@ def test_unreadable_file_simulated(tmp_path, monkeypatch, what):
 
 def test_memory_check_uses_the_machine(tmp_path, monkeypatch):
     """The film estimate (README, Numerical limits) against this machine's memory."""
-    need = job.render_memory_bytes(4096, 4096, 3, 0)
+    need = resources.render_memory_bytes(4096, 4096, 3, 0)
     assert need == 300 * 2**20 + 4096 * 4096 * 260
-    monkeypatch.setattr(job, "physical_memory_bytes", lambda: need - 1)
-    with pytest.raises(UserError, match="memory") as err:
+    need += resources.geometry_memory_bytes(20 * 4**shapes.DEFAULT_SUBDIVISIONS)  # one sphere
+    monkeypatch.setattr(resources, "memory_limit", lambda: MemoryLimit(need - 1, "limit X"))
+    with pytest.raises(UserError, match="memory.*more than limit X") as err:
         job.load_job(write(tmp_path, "[render]\nwidth = 4096\nheight = 4096\n" + SCENE))
     assert err.value.key == "render.height"
-    monkeypatch.setattr(job, "physical_memory_bytes", lambda: need)
+    monkeypatch.setattr(resources, "memory_limit", lambda: MemoryLimit(need, "limit X"))
     assert job.load_job(tmp_path / "job.toml").render.width == 4096
-    monkeypatch.setattr(job, "physical_memory_bytes", lambda: None)  # unknown: no check
+    monkeypatch.setattr(resources, "memory_limit", lambda: None)  # unknown: no check
     assert job.load_job(tmp_path / "job.toml").render.width == 4096
 
 
@@ -313,9 +308,9 @@ def test_largest_allowed_image_is_rejected_here_if_it_cannot_fit(tmp_path):
     """16384 x 16384 passes the 2^28 pixel limit but needs ~65 GiB: on a machine with less
     memory (this one) it is a user error naming render.height, not an out-of-memory kill
     hours later."""
-    need = job.render_memory_bytes(16384, 16384, 3, 0)
-    total = job.physical_memory_bytes()
-    if total is None or total >= need:
+    need = resources.render_memory_bytes(16384, 16384, 3, 0)
+    limit = resources.memory_limit()
+    if limit is None or limit.bytes >= need:
         pytest.skip("this machine could hold the film")
     with pytest.raises(UserError, match="GiB") as err:
         job.load_job(write(tmp_path, "[render]\nwidth = 16384\nheight = 16384\n" + SCENE))
@@ -599,7 +594,7 @@ def test_cli_malformed_job_exit_2_one_line_nothing_written(tmp_path, capsys, mon
                                                            files, text, key):
     """``relray render`` (in process) on every malformed job: exit code 2, exactly one line
     on stderr naming the key and the job file, and no file written anywhere."""
-    monkeypatch.setattr(job, "physical_memory_bytes", lambda: 16 * 2**30)
+    monkeypatch.setattr(resources, "memory_limit", lambda: MemoryLimit(16 * 2**30, "x"))
     path = make_case(tmp_path, files, text)
     before = files_under(tmp_path)
     assert cli.main(["render", str(path), "--quiet"]) == 2
@@ -622,8 +617,8 @@ def test_cli_subprocess_malformed_job(tmp_path, name):
     error, two lines; the error alone says it now."""
     _, files, text, key = next(c for c in CLI_CASES if c[0] == name)
     if name in ("image beyond memory", "spectral bands beyond memory"):
-        total = job.physical_memory_bytes()
-        if total is not None and total > job.render_memory_bytes(16384, 16384, 3, 0):
+        limit = resources.memory_limit()
+        if limit is not None and limit.bytes > resources.render_memory_bytes(16384, 16384, 3, 0):
             pytest.skip("this machine could hold the film")
     path = make_case(tmp_path, files, text)
     before = files_under(tmp_path)
@@ -675,17 +670,16 @@ def test_finished_frames_survive_every_bad_rerun(tmp_path):
 def test_degenerate_triangles_in_a_valid_scene_are_dropped_with_a_count(tmp_path):
     """Through the CLI: exit 0, one warning with the count, the frame written and finite."""
     (tmp_path / "d.obj").write_text(
-        "v -1 2 -1\nv 1 2 -1\nv 1 2 1\nv -1 2 1\nv 3 2 -1\nv nan 2 0\n"
+        "v -1 2 -1\nv 1 2 -1\nv 1 2 1\nv -1 2 1\nv 3 2 -1\n"
         "f 1 2 3\nf 1 3 4\n"        # a good quad facing the camera
         "f 1 2 5\n"                  # collinear: zero area
-        "f 2 2 3\n"                  # repeated vertex
-        "f 6 2 3\n")                 # non-finite vertex
+        "f 2 2 3\n")                 # repeated vertex (a NaN vertex is an error instead)
     text = TWO_FRAMES.replace("frames = [1, 2]", "frames = [1, 1]") + (
         '[[objects]]\nshape = "mesh"\nfile = "d.obj"\nmaterial = "lamp"\n')
     path = write(tmp_path, text)
     r = run_cli("render", str(path), "--quiet")
     assert r.returncode == 0, r.stderr
-    assert "dropped 3 degenerate triangles" in r.stderr
+    assert "dropped 2 degenerate triangles" in r.stderr
     channels, _ = read_exr(tmp_path / "out" / "f_001.exr")
     assert all(np.all(np.isfinite(v)) for v in channels.values())
 

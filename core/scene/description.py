@@ -26,10 +26,16 @@ AOV_NAMES = ("depth", "doppler", "lab_time")
 MOTION_MODES = ("snapshot", "worldline")
 SHAPES = ("sphere", "box", "quad", "mesh")
 LIGHT_TYPES = ("point", "spot", "sun", "area")
+#: Largest magnitude of any number in a scene (job keys, mesh and glTF coordinates). The
+#: kernels compute in float32 (largest value 3.4e38); a product of two numbers of this
+#: size (an area, emission × strength, colour × power) stays below 1e30, and an event
+#: γ·ct below 1e30 even at γ = 1.3e8.
+MAX_ABS_NUMBER = 1e15
 
 __all__ = ["SPECTRAL_MODES", "OUTPUT_FORMATS", "AOV_NAMES", "MOTION_MODES", "SHAPES",
-           "LIGHT_TYPES", "frozen", "RenderSettings", "OutputSettings", "CameraSettings",
-           "MotionSettings", "MaterialSpec", "ObjectSpec", "LightSpec", "SceneSpec", "Job"]
+           "LIGHT_TYPES", "MAX_ABS_NUMBER", "frozen", "RenderSettings", "OutputSettings",
+           "CameraSettings", "MotionSettings", "MaterialSpec", "ObjectSpec", "LightSpec",
+           "SceneSpec", "Job"]
 
 
 def frozen(a: Any) -> np.ndarray:

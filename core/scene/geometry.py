@@ -147,6 +147,9 @@ def _read_mesh_file(params: dict, key: str, job_file: Path) -> tuple[np.ndarray,
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise UserError(f"mesh file {path} has out-of-range face indices", key=key,
                         file=job_file)
+    problem = shapes.coordinate_problem(vertices[faces])
+    if problem is not None:
+        raise UserError(f"mesh file {path}: {problem}", key=key, file=job_file)
     return vertices[faces], vertex_normals[faces] if vertex_normals is not None else None
 
 
@@ -167,7 +170,11 @@ def tessellate(obj: ObjectSpec, key: str, job_file: Path) -> tuple[np.ndarray, n
         if len(triangles) == 0:
             raise UserError(f"mesh file {p['file']} has no triangles", key=f"{key}.file",
                             file=job_file)
-        return _transform_mesh(triangles, normals, p)
+        triangles, normals = _transform_mesh(triangles, normals, p)
+        problem = shapes.coordinate_problem(triangles)
+        if problem is not None:
+            raise UserError(f"after its transform, {problem}", key=key, file=job_file)
+        return triangles, normals
     raise ValueError(f"unknown shape {obj.shape!r}")  # job.py has validated the shape
 
 
@@ -186,8 +193,9 @@ def area_light_material(light: LightSpec, index: int) -> MaterialSpec:
 
 def _drop_degenerate(
     triangles: np.ndarray, normals: np.ndarray | None, material_ids: np.ndarray
-) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, int]:
-    """Remove triangles with zero area or non-finite vertices.
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+    """Remove triangles with zero area or non-finite vertices; also return the mask of
+    the triangles kept.
 
     Tested on float32 vertices relative to the bounding-box centre of the finite
     triangles: what the accelerator stores.
@@ -206,11 +214,22 @@ def _drop_degenerate(
     cross = np.linalg.norm(np.cross(e1, e2), axis=1)
     scale = (e1 * e1).sum(axis=1) + (e2 * e2).sum(axis=1)
     keep = finite & (cross > DEGENERATE_TOL * scale) & (cross > 0.0)
-    dropped = int(len(keep) - keep.sum())
-    if dropped:
+    if not keep.all():
         triangles, material_ids = triangles[keep], material_ids[keep]
         normals = normals[keep] if normals is not None else None
-    return triangles, normals, material_ids, dropped
+    return triangles, normals, material_ids, keep
+
+
+def _check_nothing_vanished(keep: np.ndarray, named_parts: Sequence[tuple[str, int]],
+                            file: str | Path | None) -> None:
+    """A named part whose triangles were all dropped is a UserError naming its key."""
+    start = 0
+    for key, n in named_parts:
+        if n and not keep[start:start + n].any():
+            raise UserError(f"all {n} triangles vanish: zero area (or not finite) at float32 "
+                            "precision around the scene's centre; the object is too small "
+                            "for the scene's extent, or degenerate", key=key, file=file)
+        start += n
 
 
 def _clean_normals(normals: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -227,11 +246,13 @@ def build_scene(job: Job) -> Scene:
     materials: list[MaterialSpec] = []
     lights: list[LightSpec] = []
     camera = None
+    named: list[tuple[str, int]] = []
     if job.scene.file is not None:
         tris, norms, mids, mats, gl_lights, camera = gltf.load_gltf(
             job.scene.file, key="scene.file", job_file=job.path
         )
         parts.append(_Part(tris, norms, mids))
+        named.append(("scene.file", len(tris)))
         materials += mats
         lights += gl_lights
     ids = {m.name: len(materials) + i for i, m in enumerate(job.scene.materials)}
@@ -239,17 +260,18 @@ def build_scene(job: Job) -> Scene:
     for i, obj in enumerate(job.scene.objects):
         tris, norms = tessellate(obj, f"objects[{i}]", job.path)
         parts.append(_Part(tris, norms, ids[obj.material]))
+        named.append((f"objects[{i}]", len(tris)))
     triangles, normals, material_ids = _concatenate(parts)
     return scene_from_parts(triangles, normals, material_ids, materials,
                             [*lights, *job.scene.lights], job.scene.background, camera,
-                            file=job.path)
+                            file=job.path, named_parts=named)
 
 
 def scene_from_parts(
     triangles: np.ndarray, normals: np.ndarray | None, material_ids: np.ndarray | int,
     materials: Sequence[MaterialSpec], lights: Sequence[LightSpec],
     background: Sequence[float], camera: CameraSettings | None = None, *,
-    file: str | Path | None = None,
+    file: str | Path | None = None, named_parts: Sequence[tuple[str, int]] = (),
 ) -> Scene:
     """A :class:`Scene` from triangle arrays and specs: what :func:`build_scene` does to
     a job's geometry once it is read (for callers with their own geometry: the add-on).
@@ -261,7 +283,9 @@ def scene_from_parts(
     spot and sun lights), degenerate triangles are dropped (counted in
     ``Scene.dropped_degenerate``, one warning), shading normals are made unit length,
     and triangles below the ray offset are counted (one warning). No triangle left is a
-    UserError (key ``scene``, naming ``file``).
+    UserError (key ``scene``, naming ``file``), and so is a part of ``named_parts``
+    ((key, triangle count) of the leading triangles in order, e.g. ("objects[2]", 320))
+    that lost every triangle: geometry that vanished is an error, never a black frame.
     """
     tris = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     ids = np.broadcast_to(np.asarray(material_ids, dtype=np.int32), (len(tris),))
@@ -280,11 +304,12 @@ def scene_from_parts(
         materials.append(area_light_material(light, i))
 
     triangles, normals, material_ids = _concatenate(parts)
-    triangles, normals, material_ids, dropped = _drop_degenerate(triangles, normals,
-                                                                 material_ids)
+    triangles, normals, material_ids, keep = _drop_degenerate(triangles, normals, material_ids)
+    dropped = int(len(keep) - keep.sum())
     if len(triangles) == 0:  # one message: the error says why (no warning before it)
         why = f" (all {dropped} were degenerate)" if dropped else ""
         raise UserError(f"the scene has no triangles{why}", key="scene", file=file)
+    _check_nothing_vanished(keep, named_parts, file)
     if dropped:
         log.warning("dropped %d degenerate triangles (zero area or non-finite vertices)",
                     dropped)

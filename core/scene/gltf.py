@@ -62,8 +62,9 @@ from urllib.parse import unquote
 import numpy as np
 
 from ..errors import UserError
+from ..files import MAX_BINARY_BYTES, read_input
 from .description import CameraSettings, LightSpec, MaterialSpec
-from .shapes import face_normals
+from .shapes import check_coordinates, face_normals
 
 log = logging.getLogger("relray")
 
@@ -99,16 +100,35 @@ class _CorruptError(Exception):
 # --------------------------------------------------------------------- container
 
 
-def _read_document(path: Path) -> tuple[dict[str, Any], bytes | None]:
+def _read_document(path: Path, key: str, job_file: str | Path | None
+                   ) -> tuple[dict[str, Any], bytes | None]:
     """The JSON document and the GLB binary chunk (None for .gltf)."""
-    raw = path.read_bytes()
+    raw = read_input(path, key, job_file if job_file is not None else path, MAX_BINARY_BYTES)
     if raw[:4] == _GLB_MAGIC:
         return _parse_glb(raw)
     try:
-        doc = json.loads(raw.decode("utf-8-sig"))
+        doc = _json_loads(raw.decode("utf-8-sig"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise _CorruptError(f"neither a GLB file nor glTF JSON ({e})") from None
     return _check_document(doc), None
+
+
+def _json_loads(text: str) -> Any:
+    """Strict JSON: ``NaN``, ``Infinity`` and numbers that overflow a double are refused
+    (Python's json module would accept them), as is nesting beyond the recursion limit."""
+    def no_constant(name: str) -> Any:
+        raise _CorruptError(f"'{name}' is not a JSON number")
+
+    def finite(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):
+            raise _CorruptError(f"the number {text[:40]} overflows a double")
+        return value
+
+    try:
+        return json.loads(text, parse_constant=no_constant, parse_float=finite)
+    except RecursionError:
+        raise _CorruptError("the JSON is nested too deeply") from None
 
 
 def _parse_glb(raw: bytes) -> tuple[dict[str, Any], bytes | None]:
@@ -134,7 +154,7 @@ def _parse_glb(raw: bytes) -> tuple[dict[str, Any], bytes | None]:
     if json_chunk is None:
         raise _CorruptError("no JSON chunk")
     try:
-        doc = json.loads(json_chunk.decode("utf-8"))
+        doc = _json_loads(json_chunk.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise _CorruptError(f"the JSON chunk is not valid JSON ({e})") from None
     return _check_document(doc), bin_chunk
@@ -153,10 +173,12 @@ def _check_document(doc: Any) -> dict[str, Any]:
     return doc
 
 
-def _load_buffers(doc: dict[str, Any], base: Path, glb_bin: bytes | None) -> list[bytes]:
+def _load_buffers(doc: dict[str, Any], base: Path, glb_bin: bytes | None, key: str,
+                  job_file: str | Path | None) -> list[bytes]:
     buffers = []
-    for i, buf in enumerate(doc.get("buffers", [])):
+    for i, buf in enumerate(_array(doc, "buffers")):
         uri = buf.get("uri")
+        length = _count(buf.get("byteLength"), f"buffers[{i}].byteLength")
         if uri is None:
             if glb_bin is None or i != 0:
                 raise _CorruptError(f"buffers[{i}] has no uri and there is no GLB binary chunk")
@@ -166,15 +188,16 @@ def _load_buffers(doc: dict[str, Any], base: Path, glb_bin: bytes | None) -> lis
                 data = base64.b64decode(uri.split(",", 1)[1], validate=False)
             except (IndexError, binascii.Error) as e:
                 raise _CorruptError(f"buffers[{i}] has a bad data URI ({e})") from None
-        else:
-            file = base / unquote(uri)
+        elif isinstance(uri, str):
             try:
-                data = file.read_bytes()
-            except OSError as e:
-                raise _CorruptError(f"buffers[{i}]: cannot read {file} ({e.strerror})") from None
-        if len(data) < int(buf["byteLength"]):
+                data = read_input(base / unquote(uri), key, job_file, MAX_BINARY_BYTES)
+            except UserError as e:
+                raise _CorruptError(f"buffers[{i}]: {e.detail}") from None
+        else:
+            raise _CorruptError(f"buffers[{i}].uri must be a string")
+        if len(data) < length:
             raise _CorruptError(f"truncated: buffers[{i}] has {len(data)} of its "
-                           f"{buf['byteLength']} bytes")
+                                f"{length} bytes")
         buffers.append(data)
     return buffers
 
@@ -186,12 +209,50 @@ def _normalized_to_float(a: np.ndarray) -> np.ndarray:
     return np.maximum(x, -1.0) if info.min < 0 else x
 
 
+def _count(value: Any, where: str) -> int:
+    """A non-negative JSON integer (a count, a byte offset or length)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise _CorruptError(f"{where} must be a non-negative integer, got {str(value)[:40]}")
+    return value
+
+
+def _index(value: Any, length: int, where: str) -> int:
+    """A JSON integer that indexes an array of ``length`` (no negative indices)."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < length:
+        raise _CorruptError(f"{where} = {str(value)[:40]} does not index the {length} "
+                            "entries there are")
+    return value
+
+
+def _array(doc: dict[str, Any], name: str) -> list[Any]:
+    """The top-level array ``name`` (empty when absent); its entries must be objects."""
+    value = doc.get(name, [])
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        raise _CorruptError(f"'{name}' must be an array of objects")
+    return value
+
+
+def _item(doc: dict[str, Any], name: str, index: Any, where: str) -> dict[str, Any]:
+    """``doc[name][index]``, the index checked (``where`` names the reference)."""
+    entries = _array(doc, name)
+    return entries[_index(index, len(entries), where)]
+
+
+def _choice(value: Any, table: dict[Any, Any], where: str) -> Any:
+    if isinstance(value, bool) or value not in table:
+        raise _CorruptError(f"{where} = {str(value)[:40]} is not one of "
+                            f"{', '.join(map(str, table))}")
+    return table[value]
+
+
 def _read_accessor(doc: dict[str, Any], buffers: list[bytes], index: int) -> np.ndarray:
     """Accessor ``index`` as an array (count, components), sparse values applied."""
-    acc = doc["accessors"][index]
-    dtype = np.dtype(_COMPONENT_DTYPES[acc["componentType"]])
-    n = _TYPE_SIZES[acc["type"]]
-    count = int(acc["count"])
+    where = f"accessors[{index}]"
+    acc = _item(doc, "accessors", index, where)
+    dtype = np.dtype(_choice(acc.get("componentType"), _COMPONENT_DTYPES,
+                             f"{where}.componentType"))
+    n = _choice(acc.get("type"), _TYPE_SIZES, f"{where}.type")
+    count = _count(acc.get("count"), f"{where}.count")
     has_view = "bufferView" in acc
     limit = MAX_ACCESSOR_VALUES if has_view else MAX_ZERO_ACCESSOR_VALUES
     if count < 0 or count * n > limit:
@@ -199,18 +260,24 @@ def _read_accessor(doc: dict[str, Any], buffers: list[bytes], index: int) -> np.
         raise _CorruptError(f"accessors[{index}]: count {count} x {n} components is beyond "
                             f"what relray loads ({limit} numbers{what})")
     if "bufferView" in acc:
-        out = _read_view(doc, buffers, acc["bufferView"], acc.get("byteOffset", 0), dtype,
-                         count, n)
+        out = _read_view(doc, buffers, acc["bufferView"],
+                         _count(acc.get("byteOffset", 0), f"{where}.byteOffset"), dtype, count, n)
     else:
         out = np.zeros((count, n), dtype=dtype)
     sparse = acc.get("sparse")
     if sparse:
-        k = int(sparse["count"])
+        k = _count(sparse.get("count"), f"{where}.sparse.count")
+        if k > count:
+            raise _CorruptError(f"{where}.sparse.count {k} exceeds the count {count}")
         si, sv = sparse["indices"], sparse["values"]
-        idx_dtype = np.dtype(_COMPONENT_DTYPES[si["componentType"]])
-        idx = _read_view(doc, buffers, si["bufferView"], si.get("byteOffset", 0), idx_dtype, k,
-                         1).ravel().astype(np.int64)
-        vals = _read_view(doc, buffers, sv["bufferView"], sv.get("byteOffset", 0), dtype, k, n)
+        idx_dtype = np.dtype(_choice(si.get("componentType"), _COMPONENT_DTYPES,
+                                     f"{where}.sparse.indices.componentType"))
+        idx = _read_view(doc, buffers, si["bufferView"],
+                         _count(si.get("byteOffset", 0), f"{where}.sparse.indices.byteOffset"),
+                         idx_dtype, k, 1).ravel().astype(np.int64)
+        vals = _read_view(doc, buffers, sv["bufferView"],
+                          _count(sv.get("byteOffset", 0), f"{where}.sparse.values.byteOffset"),
+                          dtype, k, n)
         if k and (idx.min() < 0 or idx.max() >= count):
             raise _CorruptError(f"accessors[{index}]: sparse index out of range")
         out = out.copy()
@@ -224,15 +291,17 @@ def _read_view(
     doc: dict[str, Any], buffers: list[bytes], view_index: int, offset: int,
     dtype: np.dtype, count: int, n: int,
 ) -> np.ndarray:
-    view = doc["bufferViews"][view_index]
-    buf = buffers[view["buffer"]]
-    start = int(view.get("byteOffset", 0)) + int(offset)
+    where = f"bufferViews[{view_index}]"
+    view = _item(doc, "bufferViews", view_index, where)
+    buf = buffers[_index(view.get("buffer"), len(buffers), f"{where}.buffer")]
+    view_start = _count(view.get("byteOffset", 0), f"{where}.byteOffset")
+    start = view_start + offset
     elem = dtype.itemsize * n
-    stride = int(view.get("byteStride") or elem)
+    stride = _count(view.get("byteStride") or elem, f"{where}.byteStride")
     end = start + stride * (count - 1) + elem if count else start
-    view_end = int(view.get("byteOffset", 0)) + int(view["byteLength"])
-    if end > view_end or view_end > len(buf) or start < 0 or stride < elem:
-        raise _CorruptError(f"bufferViews[{view_index}] is out of range of its buffer (truncated?)")
+    view_end = view_start + _count(view.get("byteLength"), f"{where}.byteLength")
+    if end > view_end or view_end > len(buf) or stride < elem:
+        raise _CorruptError(f"{where} is out of range of its buffer (truncated?)")
     if count == 0:
         return np.zeros((0, n), dtype=dtype)
     arr = np.ndarray((count, n), dtype=dtype, buffer=buf, offset=start,
@@ -268,28 +337,47 @@ def _local_matrix(node: dict[str, Any]) -> np.ndarray:
 
 
 def _walk_nodes(doc: dict[str, Any]) -> Iterator[tuple[int, dict[str, Any], np.ndarray]]:
-    """Depth-first (index, node, world matrix in Z-up) over the default scene."""
-    nodes = doc.get("nodes", [])
-    scenes = doc.get("scenes")
+    """Depth-first (index, node, world matrix in Z-up) over the default scene.
+
+    glTF requires the node hierarchy to be a forest: no node is a child twice, or a
+    child and a root, and there are no cycles. A document that shares a child (a DAG,
+    whose traversal would multiply the work by every shared level) or has a cycle is
+    refused, so the walk visits each node at most once: linear in the node count.
+    """
+    nodes = _array(doc, "nodes")
+    scenes = _array(doc, "scenes")
     if scenes:
-        roots = scenes[doc.get("scene", 0)].get("nodes", [])
+        scene = _item(doc, "scenes", doc.get("scene", 0), "scene")
+        roots = scene.get("nodes", [])
     else:
-        children = {c for n in nodes for c in n.get("children", [])}
+        children = {c for n in nodes for c in _children(n)}
         roots = [i for i in range(len(nodes)) if i not in children]
+    if not isinstance(roots, list):
+        raise _CorruptError("a scene's 'nodes' must be an array of node indices")
     to_z_up = np.eye(4)
     to_z_up[:3, :3] = Y_UP_TO_Z_UP
-    stack = [(int(i), to_z_up, frozenset()) for i in reversed(roots)]
+    seen: set[int] = set()
+    stack = [(_index(i, len(nodes), "scene.nodes[]"), to_z_up) for i in reversed(roots)]
     while stack:
-        index, parent, ancestors = stack.pop()
-        if index in ancestors:
-            raise _CorruptError(f"nodes[{index}] is its own ancestor (a cycle)")
+        index, parent = stack.pop()
+        if index in seen:
+            raise _CorruptError(f"nodes[{index}] is reached twice (a shared child, a cycle or "
+                                "a repeated root); glTF node hierarchies must be trees")
+        seen.add(index)
         node = nodes[index]
         world = parent @ _local_matrix(node)
         if not np.all(np.isfinite(world)):
             raise _CorruptError(f"nodes[{index}] has a non-finite transform")
         yield index, node, world
-        below = ancestors | {index}
-        stack.extend((int(c), world, below) for c in reversed(node.get("children", [])))
+        stack.extend((_index(c, len(nodes), f"nodes[{index}].children[]"), world)
+                     for c in reversed(_children(node)))
+
+
+def _children(node: dict[str, Any]) -> list[Any]:
+    children = node.get("children", [])
+    if not isinstance(children, list):
+        raise _CorruptError("a node's 'children' must be an array of node indices")
+    return children
 
 
 # ----------------------------------------------------------------------- meshes
@@ -323,6 +411,7 @@ def _primitive_triangles(
     if "POSITION" not in attributes:
         return None
     positions = _read_accessor(doc, buffers, attributes["POSITION"]).astype(np.float64)[:, :3]
+    check_coordinates(positions, f"{where}: POSITION", _CorruptError)
     if "indices" in prim:
         indices = _read_accessor(doc, buffers, prim["indices"]).ravel().astype(np.int64)
         if len(indices) and (indices.min() < 0 or indices.max() >= len(positions)):
@@ -337,6 +426,7 @@ def _primitive_triangles(
     if np.linalg.det(M3) < 0:  # a mirroring transform reverses the winding (glTF spec)
         faces = faces[:, [0, 2, 1]]
     triangles = (positions @ M3.T + t)[faces]
+    check_coordinates(triangles, f"{where}: its world positions", _CorruptError)
     normals = None
     if "NORMAL" in attributes:
         n = _read_accessor(doc, buffers, attributes["NORMAL"]).astype(np.float64)[:, :3]
@@ -467,10 +557,9 @@ def _camera_settings(cam: dict[str, Any], world: np.ndarray, where: str) -> Came
 
 
 def _first_camera(doc: dict[str, Any]) -> CameraSettings | None:
-    cameras = doc.get("cameras", [])
     for index, node, world in _walk_nodes(doc):
         if "camera" in node:
-            cam = cameras[node["camera"]]
+            cam = _item(doc, "cameras", node["camera"], f"nodes[{index}].camera")
             if cam.get("type") == "perspective":
                 return _camera_settings(cam, world, f"cameras[{node['camera']}]")
             log.warning("glTF nodes[%d]: orthographic cameras are skipped", index)
@@ -492,8 +581,24 @@ def _guarded(path: Path, key: str, job_file: str | Path | None, func: Any) -> An
         raise _user_error(path, key, job_file, str(e)) from None
     except OSError as e:
         raise _user_error(path, key, job_file, e.strerror or str(e)) from None
-    except (KeyError, IndexError, TypeError, ValueError, AttributeError, struct.error) as e:
+    except RecursionError:
+        raise _user_error(path, key, job_file, "nested too deeply") from None
+    except (KeyError, IndexError, TypeError, ValueError, AttributeError, OverflowError,
+            struct.error) as e:
         raise _user_error(path, key, job_file, f"malformed ({type(e).__name__}: {e})") from None
+
+
+def external_files(path: str | Path) -> list[Path]:
+    """The files a glTF document reads besides itself (its buffers' file URIs), for the
+    resume digest; [] when the document cannot be read (loading it will say why)."""
+    path = Path(path)
+    try:
+        doc, _ = _read_document(path, "scene.file", path)
+        uris = [b.get("uri") for b in _array(doc, "buffers")]
+    except (UserError, _CorruptError, KeyError, TypeError, ValueError, RecursionError):
+        return []
+    return [path.parent / unquote(u) for u in uris
+            if isinstance(u, str) and not u.startswith("data:")]
 
 
 def find_camera(
@@ -501,7 +606,8 @@ def find_camera(
 ) -> CameraSettings | None:
     """The file's first perspective camera, or None. Reads only the JSON part."""
     path = Path(path)
-    return _guarded(path, key, job_file, lambda: _first_camera(_read_document(path)[0]))
+    return _guarded(path, key, job_file,
+                    lambda: _first_camera(_read_document(path, key, job_file)[0]))
 
 
 def load_gltf(
@@ -515,29 +621,28 @@ def load_gltf(
     sun); the first perspective camera or None. Errors name ``key`` in ``job_file``.
     """
     path = Path(path)
-    return _guarded(path, key, job_file, lambda: _load(path))
+    return _guarded(path, key, job_file, lambda: _load(path, key, job_file))
 
 
-def _load(path: Path) -> GltfResult:
-    doc, glb_bin = _read_document(path)
-    buffers = _load_buffers(doc, path.parent, glb_bin)
+def _load(path: Path, key: str, job_file: str | Path | None) -> GltfResult:
+    doc, glb_bin = _read_document(path, key, job_file)
+    buffers = _load_buffers(doc, path.parent, glb_bin, key, job_file)
     materials = [_material(m, i) for i, m in enumerate(doc.get("materials", []))]
     default_id: int | None = None
     tris, norms, mids = [], [], []
     lights: list[LightSpec] = []
     light_defs = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
-    for _, node, world in _walk_nodes(doc):
+    for index, node, world in _walk_nodes(doc):
         if "mesh" in node:
-            mesh = doc["meshes"][node["mesh"]]
+            mesh = _item(doc, "meshes", node["mesh"], f"nodes[{index}].mesh")
             for p, prim in enumerate(mesh["primitives"]):
                 where = f"meshes[{node['mesh']}].primitives[{p}]"
                 got = _primitive_triangles(doc, buffers, prim, world, where)
                 if got is None or len(got[0]) == 0:
                     continue
                 if "material" in prim:
-                    mid = int(prim["material"])
-                    if not 0 <= mid < len(materials):
-                        raise _CorruptError(f"{where}.material {mid} does not exist")
+                    mid = _index(prim["material"], len(doc.get("materials", [])),
+                                 f"{where}.material")
                 else:
                     if default_id is None:
                         default_id = len(materials)
@@ -548,7 +653,8 @@ def _load(path: Path) -> GltfResult:
                 mids.append(np.full(len(got[0]), mid, dtype=np.int32))
         light_ref = node.get("extensions", {}).get("KHR_lights_punctual")
         if light_ref is not None:
-            li = int(light_ref["light"])
+            li = _index(light_ref.get("light"), len(light_defs),
+                        f"nodes[{index}].extensions.KHR_lights_punctual.light")
             lights.append(_light(light_defs[li], world, f"KHR_lights_punctual.lights[{li}]"))
     triangles = np.concatenate(tris) if tris else np.zeros((0, 3, 3))
     normals = None

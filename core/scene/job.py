@@ -61,7 +61,7 @@ Semantics beyond job-format.md
   within ±1e15 (``MAX_ABS_NUMBER``), frame numbers within ±(2^31-1), spectral band steps
   are >= 0.1 nm, Gaussian emission lines sit inside the 1 nm - 100 µm grid with
   sigma >= 1e-6 x centre, and an image whose film would not fit in this machine's
-  physical memory (``render_memory_bytes``) is rejected (key ``render.height``).
+  memory limit (:mod:`..resources`) is rejected (key ``render.height``).
 - **Camera orientation**: exactly one of ``look_at``/``up``, ``rotation`` (3x3,
   orthonormal, det +1, rows as written in the TOML) or ``matrix`` (4x4
   camera-to-world, rows as written, bottom row 0 0 0 1, any uniform or per-axis scale
@@ -97,7 +97,7 @@ from __future__ import annotations
 
 import difflib
 import math
-import os
+import sys
 import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -106,11 +106,14 @@ from typing import Any
 
 import numpy as np
 
+from .. import resources
 from ..errors import UserError
+from ..files import MAX_TEXT_BYTES, check_readable, read_input, resolve_path
 from . import gltf, shapes
 from .description import (
     AOV_NAMES,
     LIGHT_TYPES,
+    MAX_ABS_NUMBER,
     MOTION_MODES,
     OUTPUT_FORMATS,
     SHAPES,
@@ -137,23 +140,12 @@ MAX_FRAMES = 1_000_000
 MAX_FRAME_NUMBER = 2**31 - 1
 #: render.seed is hashed as a 64-bit integer by the kernels (sampling.path_key).
 MAX_SEED = 2**63 - 1
-#: Largest magnitude of any number in a job. The kernels compute in float32 (largest
-#: value 3.4e38); a product of two numbers of this size (an area, emission × strength,
-#: colour × power) stays below 1e30, and an event γ·ct below 1e30 even at γ = 1.3e8.
-MAX_ABS_NUMBER = 1e15
 #: Gaussian emission lines: centre inside the spectral grid (spectrum.GRID_MIN_NM ..
 #: GRID_MAX_NM) and sigma >= MIN_LINE_SIGMA_REL x centre (narrower ones have no area on it).
 LINE_RANGE_NM = (1.0, 1.0e5)
 MIN_LINE_SIGMA_REL = 1e-6
 #: Narrowest spectral band (nm): keeps the band count, and the film, bounded.
 MIN_BAND_STEP_NM = 0.1
-#: Peak memory of a render, measured (README, "Numerical limits"): about 300 MB of fixed
-#: cost (Python, numba, Embree, wavefront buffers) plus, per pixel, the film's float64
-#: sums and the copies made while resolving and writing it: 260 bytes with the three
-#: AOVs, about 32 more per AOV or spectral band.
-MEMORY_FIXED_BYTES = 300 * 2**20
-MEMORY_BYTES_PER_PIXEL = 164
-MEMORY_BYTES_PER_PIXEL_PER_LAYER = 32
 SENSOR_RANGE_NM = (360.0, 830.0)
 #: Tolerance of the orthonormality check of camera rotations and matrices.
 ROTATION_TOL = 1e-4
@@ -421,31 +413,37 @@ def _parse_render(t: dict[str, Any], ctx: _Ctx) -> RenderSettings:
         spectral=_get_str(t, ctx, "spectral", "cie1931", SPECTRAL_MODES),
         doppler=_get_bool(t, ctx, "doppler", True),
         searchlight=_get_bool(t, ctx, "searchlight", True),
-        threads=_get_int(t, ctx, "threads", 0, 0, 65536),
+        threads=_threads(t, ctx, "threads"),
         transparent=_get_bool(t, ctx, "transparent", False),
     )
 
 
-def _resolve_path(value: str, base: Path) -> Path:
-    p = Path(value).expanduser()
-    return (p if p.is_absolute() else base / p).resolve()
+def _threads(t: Mapping[str, Any], ctx: _Ctx, name: str) -> int:
+    """Render threads: 0 (all cores) up to :func:`.resources.max_threads` on this machine."""
+    most = resources.max_threads()
+    threads = _get_int(t, ctx, name, 0, 0, 65536)
+    if threads > most:
+        raise ctx.error(name, f"{threads} threads is more than {resources.MAX_THREADS_PER_CORE} "
+                              f"per core ({resources.usable_cores()} usable cores here): at "
+                              f"most {most}; 0 uses every core")
+    return threads
+
+
+def _resolve_path(value: str, base: Path, ctx: _Ctx | None = None, name: str = "") -> Path:
+    if ctx is None:
+        return resolve_path(value, base, None, None)
+    return resolve_path(value, base, ctx.key(name), ctx.file)
 
 
 def _check_name_template(name: str, frames: tuple[int, int], ctx: _Ctx, key: str) -> None:
+    """The template's syntax (it may only use {frame}). Every frame's resulting name is
+    checked before rendering by :func:`..output.frame_files.check_frame_names`."""
     try:
-        first = name.format(frame=frames[0])
-        second = name.format(frame=frames[0] + 1)
+        name.format(frame=frames[0])
     except (KeyError, IndexError, ValueError, AttributeError, TypeError) as e:
         raise ctx.error(
             key, f"'{name}' is not a valid name template (it may only use {{frame}}): {e!r}"
         ) from None
-    if first.strip() in ("", ".", "..") or any(c in first for c in "/\\\0"):
-        raise ctx.error(key, f"'{name}' does not give a file name (got '{first}')")
-    if frames[1] > frames[0] and first == second:
-        raise ctx.error(
-            key, f"'{name}' gives every frame the same file name: add {{frame}}, "
-            "e.g. 'frame_{frame:04d}'",
-        )
 
 
 def _parse_output(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> OutputSettings:
@@ -479,7 +477,7 @@ def _parse_output(t: dict[str, Any], ctx: _Ctx, job_dir: Path) -> OutputSettings
     if "aovs" in t:
         aovs = _str_list(t["aovs"], ctx, "aovs", AOV_NAMES)
     return OutputSettings(
-        dir=_resolve_path(dir_str, job_dir),
+        dir=_resolve_path(dir_str, job_dir, ctx, "dir"),
         name=name,
         formats=formats,
         spectral_bands=bands,
@@ -819,18 +817,10 @@ def _existing_file(
     value: Any, ctx: _Ctx, name: str, base: Path, suffixes: Sequence[str]
 ) -> Path:
     text = _string(value, ctx, name)
-    path = _resolve_path(text, base)
+    path = _resolve_path(text, base, ctx, name)
     if path.suffix.lower() not in suffixes:
         raise ctx.error(name, f"'{text}' must be a {' / '.join(suffixes)} file")
-    if not path.exists():
-        raise ctx.error(name, f"file not found: {path}")
-    if not path.is_file():
-        raise ctx.error(name, f"not a file: {path}")
-    try:
-        with path.open("rb") as f:
-            f.read(1)
-    except OSError as e:
-        raise ctx.error(name, f"cannot read {path}: {e.strerror}") from None
+    check_readable(path, ctx.key(name), ctx.file)
     return path
 
 
@@ -1007,14 +997,12 @@ def _include_paths(t: Mapping[str, Any], ctx: _Ctx, job_dir: Path) -> list[Path]
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise UserError("job file not found", file=path) from None
-    except IsADirectoryError:
-        raise UserError("is a directory, not a job file", file=path) from None
-    except OSError as e:
-        raise UserError(f"cannot read the job file: {e.strerror or e}", file=path) from None
+    """A TOML file's document; anything wrong with the file or its text is one UserError.
+
+    Nesting beyond Python's recursion limit and integers beyond its 4300-digit
+    conversion limit are refused with the file named, not a traceback.
+    """
+    raw = read_input(path, None, path, MAX_TEXT_BYTES)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
@@ -1023,11 +1011,16 @@ def _read_toml(path: Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise UserError(f"TOML syntax error: {e}", file=path) from None
+    except RecursionError:
+        raise UserError("arrays or tables nested too deeply", file=path) from None
+    except ValueError:  # an integer beyond sys.get_int_max_str_digits()
+        raise UserError(f"an integer has more than {sys.get_int_max_str_digits()} digits",
+                        file=path) from None
 
 
 def load_job(path: str | Path) -> Job:
     """Read and validate a TOML job file. Raises UserError for anything wrong."""
-    path = Path(path).expanduser().resolve()
+    path = resolve_path(path, None, None, path)
     return parse_job(_read_toml(path), path)
 
 
@@ -1063,8 +1056,8 @@ def _parse_job(data: Mapping[str, Any], path: Path, stack: tuple[Path, ...]) -> 
     if "spectral-exr" in output.formats and render.spectral == "rgb":
         raise ctx.error("output.formats", "spectral-exr needs a spectral mode "
                         "(render.spectral = \"cie1931\" or \"seed-gaussian\")")
-    _check_memory(render, output, ctx)
     scene = _parse_scene(data, ctx, stack)
+    _check_memory(render, output, scene, ctx)
     camera_table = _section(data, ctx, "camera")
     camera: CameraSettings | None
     if "camera" not in data and scene.file is not None and _gltf_has_camera(scene.file, path):
@@ -1075,37 +1068,37 @@ def _parse_job(data: Mapping[str, Any], path: Path, stack: tuple[Path, ...]) -> 
                scene=scene)
 
 
-def physical_memory_bytes() -> int | None:
-    """This machine's physical memory in bytes, or None where the OS does not say."""
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def render_memory_bytes(width: int, height: int, aovs: int, bands: int) -> int:
-    """Estimated peak memory of rendering one frame (see ``MEMORY_BYTES_PER_PIXEL``)."""
-    per_pixel = MEMORY_BYTES_PER_PIXEL + MEMORY_BYTES_PER_PIXEL_PER_LAYER * (aovs + bands)
-    return MEMORY_FIXED_BYTES + width * height * per_pixel
-
-
-def _check_memory(render: RenderSettings, output: OutputSettings, ctx: _Ctx) -> None:
-    """A film that cannot fit in this machine's memory is a user error, before any work."""
-    total = physical_memory_bytes()
-    if total is None:
+def _check_memory(render: RenderSettings, output: OutputSettings, scene: SceneSpec,
+                  ctx: _Ctx) -> None:
+    """A job whose film and geometry cannot fit in the memory this process may use (the
+    smallest of physical memory, cgroup limit and rlimits: :func:`.resources.memory_limit`)
+    is a user error before any work; the key is what to change."""
+    limit = resources.memory_limit()
+    if limit is None:
         return
     bands = 0
     if "spectral-exr" in output.formats:
         start, stop, step = output.spectral_bands
         bands = int(round((stop - start) / step)) + 1
-    need = render_memory_bytes(render.width, render.height, len(output.aovs), bands)
-    if need > total:
-        raise ctx.error(
-            "render.height",
-            f"{render.width} x {render.height} pixels ({len(output.aovs)} AOVs, {bands} "
-            f"spectral bands) need about {need / 2**30:.1f} GiB of memory, more than this "
-            f"machine's {total / 2**30:.1f} GiB; render a smaller image (or fewer bands)",
-        )
+    film = resources.render_memory_bytes(render.width, render.height, len(output.aovs), bands)
+    counts = [shapes.triangle_count(o.shape, o.params) for o in scene.objects]
+    geometry = resources.geometry_memory_bytes(sum(counts))
+    if film + geometry <= limit.bytes:
+        return
+    gib = 2.0**30
+    parts = (f"{render.width} x {render.height} pixels ({len(output.aovs)} AOVs, {bands} "
+             f"spectral bands): {film / gib:.1f} GiB; {sum(counts)} triangles: "
+             f"{geometry / gib:.1f} GiB")
+    if geometry > film:
+        i = max(range(len(counts)), key=counts.__getitem__)
+        key = f"objects[{i}].subdivisions" if scene.objects[i].shape == "sphere" \
+            else f"objects[{i}]"
+        advice = "use fewer subdivisions or objects"
+    else:
+        key, advice = "render.height", "render a smaller image (or fewer bands)"
+    raise UserError(f"needs about {(film + geometry) / gib:.1f} GiB of memory ({parts}), "
+                    f"more than {limit.source} allows ({limit.bytes / gib:.1f} GiB); {advice}",
+                    key=key, file=ctx.file)
 
 
 def _gltf_has_camera(file: Path, job_path: Path) -> bool:
@@ -1125,7 +1118,7 @@ def parse_motion(data: dict[str, Any], path: Path) -> MotionSettings:
 
 def load_motion(path: str | Path) -> MotionSettings:
     """Read a motion profile file (presets/motion/*.toml)."""
-    path = Path(path).expanduser().resolve()
+    path = resolve_path(path, None, None, path)
     return parse_motion(_read_toml(path), path)
 
 
@@ -1152,8 +1145,7 @@ def with_overrides(
     if spp is not None:
         render = replace(render, spp=_get_int({"--spp": spp}, ctx, "--spp", 1, 1, 2**24))
     if threads is not None:
-        render = replace(render, threads=_get_int({"--threads": threads}, ctx, "--threads",
-                                                  0, 0, 65536))
+        render = replace(render, threads=_threads({"--threads": threads}, ctx, "--threads"))
     spp, beta, ct, frames, threads = _plain([spp, beta, ct, frames, threads])
     if beta is not None:
         b = _vector(beta, ctx, "--beta", 3)
@@ -1171,7 +1163,7 @@ def with_overrides(
     if out is not None:
         if not isinstance(out, str | Path) or not str(out).strip():
             raise ctx.error("--out", "must be a directory name")
-        output = replace(output, dir=Path(out).expanduser().resolve())
+        output = replace(output, dir=resolve_path(out, None, "--out", job.path))
     return replace(job, render=render, motion=motion, output=output)
 
 

@@ -42,6 +42,8 @@ import math
 
 import numpy as np
 
+from .description import MAX_ABS_NUMBER
+
 #: The 12 vertices and 20 counter-clockwise (outward) faces of the icosahedron.
 _GOLDEN = (1.0 + math.sqrt(5.0)) / 2.0
 _ICO_VERTICES = np.array(
@@ -168,6 +170,39 @@ def quad_problem(corners: np.ndarray) -> str | None:
     if not (np.all(turns > eps) or np.all(turns < -eps)):
         return "the quad must be convex, with its corners given in order around it"
     return None
+
+
+def triangle_count(shape: str, params: dict) -> int:
+    """Triangles a job object tessellates to: sphere 20·4^s, box 12, quad 2; a mesh 0
+    (unknown until its file is read)."""
+    if shape == "sphere":
+        return 20 * 4 ** int(params["subdivisions"])
+    return {"box": 12, "quad": 2}.get(shape, 0)
+
+
+def coordinate_problem(points: np.ndarray) -> str | None:
+    """Why ``points`` cannot be rendered, or None: every coordinate must be finite and
+    within ±``MAX_ABS_NUMBER`` (1e15), the bound of every number in a job. One vertex at
+    1e30 would otherwise move the float32 frame centre of the accelerator so far that
+    the real geometry collapses to zero area."""
+    a = np.asarray(points, dtype=np.float64)
+    if a.size == 0:
+        return None
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            return "a coordinate is not finite (NaN or inf)"
+        worst = float(np.abs(a).max())
+    if worst > MAX_ABS_NUMBER:
+        return f"a coordinate is {worst:.3g}, beyond ±{MAX_ABS_NUMBER:g}"
+    return None
+
+
+def check_coordinates(points: np.ndarray, where: str, error: type[Exception]) -> None:
+    """Raise ``error("<where>: <why>")`` when :func:`coordinate_problem` finds one."""
+    problem = coordinate_problem(points)
+    if problem is not None:
+        raise error(f"{where}: {problem}")
 
 
 def face_normals(triangles: np.ndarray) -> np.ndarray:
