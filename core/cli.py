@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
+import re
 import signal
 import sys
 import threading
@@ -28,6 +30,7 @@ import numpy as np
 from . import farm
 from .errors import UserError
 from .output.contact import write_contact_sheet
+from .output.frame_files import check_frame_names
 from .physics import relativity
 from .progress import JsonReporter, TqdmReporter, default_reporter
 from .render.camera import PinholeCamera, lab_rays
@@ -39,6 +42,13 @@ from .scene.motion import camera_settings, frame_events
 EXIT_FRAMES_FAILED = 1
 EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141
+"""The reader of stdout went away (``relray info job.toml | head``): 128 + SIGPIPE, as a
+shell reports a command killed by SIGPIPE, but silently and without dying by it."""
+DEBUG_ENV = "RELRAY_DEBUG"
+"""Set to 1 to get the Python traceback of an internal error."""
+MAX_THREADS_PER_CORE = 4
+"""``--threads`` above this many per core is refused (more threads only add overhead)."""
 
 
 def parse_frames(text: str, file: Path | None = None) -> tuple[int, int]:
@@ -73,17 +83,51 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USER_ERROR, f"relray: error: {' '.join(message.split())}\n")
 
 
+def add_overrides(p: argparse.ArgumentParser) -> None:
+    """The job file and the options that override its keys (``render`` and ``info``)."""
+    p.add_argument("job", type=Path)
+    p.add_argument("--frames", help="A-B: render only these frames")
+    p.add_argument("--spp", type=int, help="samples per pixel")
+    p.add_argument("--beta", help="camera velocity x,y,z (lab frame, |beta| < 1)")
+    p.add_argument("--ct", type=float, help="camera proper time of the first frame")
+    p.add_argument("--out", type=Path, help="output folder")
+    p.add_argument("--threads", type=int, help="worker threads (0 = all cores)")
+
+
+_NEGATIVE_VALUE = re.compile(r"-(\d|\.\d|inf|nan)", re.IGNORECASE)
+
+
+def join_negative_values(argv: list[str], parser: argparse.ArgumentParser) -> list[str]:
+    """``--beta -0.5,0,0`` -> ``--beta=-0.5,0,0`` for every option that takes a value.
+
+    argparse reads a token that starts with '-' as an option unless it is a plain
+    negative number, so a negative vector (or ``--ct -1e3``) would be refused with
+    "expected one argument".
+    """
+    takes_value = {opt for action in parser._actions if action.nargs is None
+                   and action.option_strings for opt in action.option_strings}
+    for sub in parser._actions:
+        for choice in getattr(sub, "choices", None) or {}:
+            takes_value |= {opt for action in sub.choices[choice]._actions
+                            if action.nargs is None and action.option_strings
+                            for opt in action.option_strings}
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        if argv[i] in takes_value and i + 1 < len(argv) and _NEGATIVE_VALUE.match(argv[i + 1]):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="relray", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a job's frames")
-    r.add_argument("job", type=Path)
-    r.add_argument("--frames", help="A-B: render only these frames")
-    r.add_argument("--spp", type=int, help="samples per pixel")
-    r.add_argument("--beta", help="camera velocity x,y,z (lab frame, |beta| < 1)")
-    r.add_argument("--ct", type=float, help="camera proper time of the first frame")
-    r.add_argument("--out", type=Path, help="output folder")
-    r.add_argument("--threads", type=int, help="worker threads (0 = all cores)")
+    add_overrides(r)
     r.add_argument("--overwrite", action="store_true", help="render finished frames again")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.add_argument("--scheduler", metavar="ADDRESS",
@@ -96,8 +140,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds to reach --scheduler (default 10)")
     r.add_argument("--json-progress", action="store_true",
                    help="print progress as JSON lines on stdout (for other programs)")
-    i = sub.add_parser("info", help="print the parsed job, gamma and the D range")
-    i.add_argument("job", type=Path)
+    i = sub.add_parser("info", help="print the parsed job, gamma and the D range "
+                       "(with the same overrides as render: what a render would do)")
+    add_overrides(i)
     c = sub.add_parser("contact-sheet", help="tile a folder's PNG frames into one image")
     c.add_argument("folder", type=Path)
     c.add_argument("--out", type=Path, required=True)
@@ -136,7 +181,8 @@ def check_farm_options(args: argparse.Namespace) -> None:
 
 @contextlib.contextmanager
 def interrupts(cancel: threading.Event) -> Iterator[None]:
-    """SIGINT and SIGTERM set ``cancel`` and raise KeyboardInterrupt (main thread only)."""
+    """SIGINT, SIGTERM and SIGHUP set ``cancel`` and raise KeyboardInterrupt (main thread
+    only)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -145,7 +191,7 @@ def interrupts(cancel: threading.Event) -> Iterator[None]:
         cancel.set()
         raise KeyboardInterrupt
 
-    names = ("SIGINT", "SIGTERM", "SIGBREAK")
+    names = ("SIGINT", "SIGTERM", "SIGHUP", "SIGBREAK")
     sigs = [getattr(signal, n) for n in names if hasattr(signal, n)]
     old = {sig: signal.signal(sig, handler) for sig in sigs}
     try:
@@ -196,13 +242,15 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_info(args: argparse.Namespace) -> int:
     job = load_with_overrides(args)
+    events = frame_events(job)
+    check_frame_names(job, [frame for frame, _ in events])
     print(jobmod.job_summary(job))
     cam = camera_settings(job)
     pin = PinholeCamera.from_settings(cam, job.render.width, job.render.height)
     cols, rows = np.meshgrid(np.linspace(0, job.render.width, 33),
                              np.linspace(0, job.render.height, 33))
     d_cam = pin.directions_cam(cols.ravel(), rows.ravel())
-    for frame, ev in frame_events(job):
+    for frame, ev in events:
         _, D = lab_rays(d_cam, ev.beta)
         speed = float(np.linalg.norm(ev.beta))
         print(f"frame {frame}: beta = {np.array2string(ev.beta, precision=6)} "
@@ -223,23 +271,71 @@ def cmd_contact_sheet(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one command; every failure ends as one line on stderr and an exit code.
+
+    0 done; 1 some frames failed (or an internal error: a bug, whose traceback
+    ``RELRAY_DEBUG=1`` shows); 2 a user or environment error (the job, a file, the disk,
+    memory); 130 interrupted; 141 stdout closed by its reader.
+    """
     before = list(logging.getLogger().handlers)
     logging.basicConfig(level=logging.WARNING, format="relray: %(message)s")
     for handler in logging.getLogger().handlers:  # libraries' INFO chatter (Dask) stays out
         if handler not in before:
             handler.setLevel(logging.WARNING)
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(join_negative_values(list(sys.argv[1:] if argv is None
+                                                       else argv), parser))
     commands = {"render": cmd_render, "info": cmd_info, "contact-sheet": cmd_contact_sheet}
     try:
         return commands[args.command](args)
     except UserError as e:
-        print(f"relray: error: {e}", file=sys.stderr)
-        return EXIT_USER_ERROR
+        return fail(str(e), EXIT_USER_ERROR)
     except KeyboardInterrupt:
-        print("relray: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return fail("interrupted", EXIT_INTERRUPTED, prefix="relray: ")
+    except BrokenPipeError:
+        silence_stdout()
+        return EXIT_BROKEN_PIPE
+    except MemoryError:
+        return fail("out of memory: lower render.width, render.height or the scene's "
+                    "subdivisions, or free memory", EXIT_USER_ERROR, file=args.job
+                    if hasattr(args, "job") else None)
+    except RecursionError:
+        return fail("nested too deeply to read", EXIT_USER_ERROR,
+                    file=getattr(args, "job", None))
+    except OSError as e:
+        return fail(os_error_message(e), EXIT_USER_ERROR)
+    except Exception as e:  # a bug: one line, the traceback only on request
+        if os.environ.get(DEBUG_ENV):
+            raise
+        return fail(f"internal error: {type(e).__name__}: {' '.join(str(e).split())} "
+                    f"(set {DEBUG_ENV}=1 for the traceback, and please report it)",
+                    EXIT_FRAMES_FAILED)
+
+
+def fail(message: str, code: int, file: Path | None = None,
+         prefix: str = "relray: error: ") -> int:
+    """Print one line on stderr (``file: message``); return ``code``."""
+    where = f"{file}: " if file is not None else ""
+    with contextlib.suppress(OSError):
+        print(f"{prefix}{where}{message}", file=sys.stderr)
+    return code
+
+
+def os_error_message(e: OSError) -> str:
+    """An environment error (disk full, permissions, a symlink loop ...) as one line that
+    names the file."""
+    reason = e.strerror or " ".join(str(e).split()) or type(e).__name__
+    names = [str(f) for f in (e.filename, e.filename2) if f is not None]
+    return f"{' -> '.join(names)}: {reason}" if names else reason
+
+
+def silence_stdout() -> None:
+    """Point stdout at the null device, so that the interpreter's final flush of a
+    closed pipe does not print "Exception ignored ... BrokenPipeError"."""
+    with contextlib.suppress(OSError, ValueError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
 
 
 if __name__ == "__main__":
     sys.exit(main())
-

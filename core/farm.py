@@ -101,6 +101,7 @@ from .physics.spectrum import sensor_to_rgb
 from .progress import Reporter
 from .render.film import Film
 from .render.frames import FrameRenderer, build_renderer
+from .resources import usable_cores
 from .scene.description import Job
 from .scene.geometry import build_scene
 from .scene.motion import resolve_camera
@@ -119,18 +120,6 @@ TEST_PAUSE_ENV = "RELRAY_TEST_PAUSE_FRAME"
 LOOPBACK_NO_DASHBOARD: dict[str, Any] = {"dashboard_address": "127.0.0.1:0",
                                          "scheduler_kwargs": {"dashboard": False}}
 """LocalCluster options: the scheduler's HTTP endpoint on a free loopback port, no dashboard."""
-
-
-
-
-
-
-
-
-
-
-
-
 
 
 # ------------------------------------------------------------------------------ subprocess contract
@@ -204,14 +193,6 @@ def sample_batches(spp: int, batches: int = STILL_BATCHES) -> list[tuple[int, in
     return [(bounds[k], bounds[k + 1]) for k in range(n)]
 
 
-def available_cores() -> int:
-    """CPU cores this process may run on (affinity, e.g. a SLURM cpuset), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
 def task_threads(requested: int, host_slots: Mapping[str, int] | None = None) -> int:
     """Render threads of one task: ``requested``, else cores / the task slots of this host.
 
@@ -230,7 +211,7 @@ def task_threads(requested: int, host_slots: Mapping[str, int] | None = None) ->
         slots = max(1, int(worker.state.nthreads))
         if host_slots:
             slots = max(slots, int(host_slots.get(get_address_host(worker.address), 0)))
-    return max(1, available_cores() // slots)
+    return max(1, usable_cores() // slots)
 
 
 def host_slots(client: Any) -> dict[str, int]:
@@ -350,6 +331,31 @@ def scheduler_address(text: str) -> str:
     return f"{scheme}://{host}:{port}"
 
 
+def within(seconds: float, call: Callable[[], Any]) -> Any:
+    """``call()``, or TimeoutError after ``seconds`` (plus a second of grace).
+
+    For waits that do not keep their own timeout: Dask's client handshake with a peer
+    that accepts the connection and never answers blocks forever. The call runs in a
+    daemon thread, which is abandoned on timeout (it cannot keep the process alive).
+    """
+    box: dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            box["value"] = call()
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller's thread
+            box["error"] = exc
+
+    thread = threading.Thread(target=run, name="relray-deadline", daemon=True)
+    thread.start()
+    thread.join(seconds + 1.0)
+    if thread.is_alive():
+        raise TimeoutError(f"no answer within {seconds:g} s")
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int = 0,
                 timeout: float = DEFAULT_CONNECT_TIMEOUT,
@@ -364,8 +370,13 @@ def dask_client(scheduler: str | None = None, workers: int = 0,
     if scheduler:
         address = scheduler_address(scheduler)
         try:
-            client = Client(address, timeout=timeout, set_as_default=False)
-        except Exception as exc:  # OSError, TimeoutError, ValueError from the comm layer
+            client = within(timeout, lambda: Client(address, timeout=timeout,
+                                                    set_as_default=False))
+        except TimeoutError:
+            raise UserError(f"the Dask scheduler {address} did not answer within {timeout:g} s "
+                            "(is it a Dask scheduler?)", key="--scheduler",
+                            file=job_path) from None
+        except Exception as exc:  # OSError, ValueError from the comm layer
             detail = " ".join(str(exc).split()) or type(exc).__name__
             raise UserError(f"cannot reach the Dask scheduler {address}: {detail}",
                             key="--scheduler", file=job_path) from None
@@ -545,7 +556,7 @@ def with_render_threads(job: Job, threads: int) -> Job:
 
 
 __all__ = [
-    "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "available_cores", "dask_client",
+    "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "dask_client",
     "render", "render_batch_task", "render_command", "render_frame_task", "render_on_dask",
     "host_slots", "sample_batches", "scheduler_address", "subprocess_env", "task_threads",
     "with_render_threads", "worker_renderer",

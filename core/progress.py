@@ -9,7 +9,8 @@ warnings only. Every object has ``"event"``:
 event         fields
 ============  ==========================================================================
 start         version, job, out, mode ("local" | "dask"), scheduler, workers,
-              frames [first, last], done, to_render, todo [frames], unit, units
+              frames [first, last], done, to_render, stale (of to_render: changed
+              since they were rendered), todo [frames], unit, units
 progress      fraction (0..1), frames_done, frames_total, elapsed, eta_seconds (or null)
 frame_done    frame, path (the EXR, else the first file), paths, seconds, fraction,
               frames_done, frames_total
@@ -124,8 +125,9 @@ class Reporter:
 
 
 def plan_message(plan: FramePlan, out_dir: Path) -> str:
-    """'relray: N done, M to render -> DIR'."""
-    return f"relray: {plan.done} done, {len(plan.todo)} to render -> {out_dir}"
+    """"relray: N done, M to render (K changed since they were rendered) -> DIR"."""
+    stale = f" ({plan.stale} changed since they were rendered)" if plan.stale else ""
+    return f"relray: {plan.done} done, {len(plan.todo)} to render{stale} -> {out_dir}"
 
 
 class TqdmReporter(Reporter):
@@ -191,7 +193,8 @@ class JsonReporter(Reporter):
         first, last = plan.frames[0], plan.frames[-1]
         self.emit("start", version=__version__, job=str(job.path), out=str(job.output.dir),
                   mode=mode, scheduler=scheduler, workers=workers, frames=[first, last],
-                  done=plan.done, to_render=len(plan.todo), todo=[f for f, _ in plan.todo],
+                  done=plan.done, to_render=len(plan.todo), stale=plan.stale,
+                  todo=[f for f, _ in plan.todo],
                   unit=unit, units=self.units, message=plan_message(plan, job.output.dir))
 
     def _advanced(self, n: int) -> None:

@@ -132,3 +132,130 @@ def test_spectral_exr_is_written_and_readable_by_colour(tmp_path):
     wl, values = colour.io.read_spectral_image_Fichet2021(str(path))["S0"]
     assert sorted(wl.tolist()) == list(range(400, 701, 20))
     assert values.shape == (16, 24, 16) and values.max() > 0
+
+
+# ------------------------------------------------------------------ command-line habits
+
+def test_negative_vectors_and_numbers_as_separate_arguments(tmp_path):
+    """``--beta -0.5,0,0`` and ``--ct -2`` work without the '=' argparse would want."""
+    job = write_job(tmp_path)
+    r = run("info", str(job), "--beta", "-0.5,0,0", "--ct", "-2", "--frames", "2-2")
+    assert r.returncode == 0, r.stderr
+    assert "beta = [-0.5  0.   0. ]" in r.stdout and "frame 1:" not in r.stdout
+    assert "ct' = -1.5" in r.stdout  # frame 2, half a frame after --ct -2
+    assert cli.join_negative_values(["render", "j", "--beta", "-.1,0,0", "--quiet"],
+                                    cli.build_parser()) == ["render", "j", "--beta=-.1,0,0",
+                                                            "--quiet"]
+    # an option that takes no value is left alone, and so is a real option after one
+    assert cli.join_negative_values(["render", "j", "--quiet", "-1"], cli.build_parser()) \
+        == ["render", "j", "--quiet", "-1"]
+
+
+def test_info_takes_the_overrides_render_takes(tmp_path):
+    job = write_job(tmp_path)
+    r = run("info", str(job), "--spp", "7", "--out", str(tmp_path / "elsewhere"),
+            "--threads", "1", "--frames", "1-1")
+    assert r.returncode == 0, r.stderr
+    assert "7 spp" in r.stdout and str(tmp_path / "elsewhere") in r.stdout
+    assert "frame 1:" in r.stdout and "frame 2:" not in r.stdout
+    bad = run("info", str(job), "--beta", "1,0,0")
+    assert bad.returncode == 2 and "--beta" in bad.stderr
+
+
+def test_info_checks_every_frame_name_as_render_does(tmp_path):
+    job = write_job(tmp_path, TINY.replace('name = "f_{frame:03d}"', 'name = "{frame:/<2}"')
+                    .replace("frames = [1, 2]", "frames = [9, 10]"))
+    for command in ("info", "render"):
+        r = run(command, str(job))
+        assert r.returncode == 2 and "output.name" in r.stderr and "frame 9" in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+# ------------------------------------------------------------------- one line, no traceback
+
+def test_closed_stdout_is_silent(tmp_path):
+    """``relray info job.toml | head -1``: no BrokenPipeError traceback, exit 141."""
+    job = write_job(tmp_path)
+    r = subprocess.run(f"'{sys.executable}' -m relray info '{job}' | head -c 10",
+                       shell=True, capture_output=True, text=True, timeout=120,
+                       executable="/bin/bash")
+    assert r.stdout == "job       "[:10] or len(r.stdout) == 10
+    assert r.stderr == ""
+    r = subprocess.run(["bash", "-c", f"set -o pipefail; '{sys.executable}' -m relray info "
+                        f"'{job}' | head -c 1 >/dev/null; echo ${{PIPESTATUS[0]}}"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.stdout.strip() in ("0", "141") and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("args, key", [
+    (["info", "job\0.toml"], "NUL byte"),
+    (["render", "JOB", "--out", "o\0ut"], "NUL byte"),
+])
+def test_nul_bytes_in_paths(tmp_path, capsys, args, key):
+    job = write_job(tmp_path)
+    args = [a.replace("JOB", str(job)) for a in args]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and key in err[0]
+
+
+def test_symlink_loop_job(tmp_path, capsys):
+    (tmp_path / "a.toml").symlink_to(tmp_path / "b.toml")
+    (tmp_path / "b.toml").symlink_to(tmp_path / "a.toml")
+    assert cli.main(["info", str(tmp_path / "a.toml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "symlink loop" in err[0]
+
+
+def test_environment_failures_are_one_line(tmp_path, capsys, monkeypatch):
+    """MemoryError, an OSError while writing, and a bug: one line each, no traceback."""
+    job = write_job(tmp_path)
+
+    def out_of_memory(*a, **k):
+        raise MemoryError
+
+    def disk_full(*a, **k):
+        raise OSError(28, "No space left on device", str(tmp_path / "out" / "f_001.exr"))
+
+    def bug(*a, **k):
+        raise ZeroDivisionError("division by zero")
+
+    for fake, code, words in ((out_of_memory, 2, "out of memory"),
+                              (disk_full, 2, "No space left on device"),
+                              (bug, 1, "internal error: ZeroDivisionError")):
+        monkeypatch.setattr(cli, "render_job", fake)
+        assert cli.main(["render", str(job), "--quiet"]) == code
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], err
+    monkeypatch.setenv(cli.DEBUG_ENV, "1")
+    with pytest.raises(ZeroDivisionError):
+        cli.main(["render", str(job), "--quiet"])
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM", "SIGHUP"])
+def test_signal_during_start_up_is_exit_130_not_death(tmp_path, sig):
+    """A signal that arrives while numpy, numba and Embree load: "interrupted", exit 130."""
+    import signal
+    import time
+
+    job = write_job(tmp_path)
+    p = subprocess.Popen([sys.executable, "-m", "relray", "info", str(job)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.15)  # inside the imports (they take about a second)
+    p.send_signal(getattr(signal, sig))
+    out, err = p.communicate(timeout=120)
+    if p.returncode == 0:
+        pytest.fail("the command finished before the signal: start-up was faster than 0.15 s")
+    assert p.returncode == 130, (p.returncode, err)
+    assert err.strip() == "relray: interrupted"
+
+
+def test_signal_after_the_finish_is_ignored(tmp_path):
+    """Once the command has finished, a late SIGTERM changes nothing (exit 0)."""
+    code = ("import os, signal, sys; import relray; sys.argv = ['relray', 'info', sys.argv[1]];"
+            " rc = relray.cli_main(); os.kill(os.getpid(), signal.SIGTERM); "
+            "os.kill(os.getpid(), signal.SIGINT); sys.exit(rc)")
+    r = subprocess.run([sys.executable, "-c", code, str(write_job(tmp_path))],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stderr == "", r.stderr

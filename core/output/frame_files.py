@@ -1,41 +1,125 @@
-"""A frame's files: their names, the metadata they record, whether a frame is already
-done (resume), and writing a finished film.
+"""A frame's files: their names (checked for every frame before anything renders), the
+metadata they record, whether a frame is already done (resume: the recorded
+:mod:`.digest` equals the job's), and writing a finished film.
 """
 
 from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from ..errors import UserError
+from ..files import is_regular_file
 from ..physics import relativity
 from ..render.film import Film
 from ..scene.description import Job
 from ..scene.motion import frame_events
-from .imageio import frame_complete, metadata_for, remove_stale_temps, write_frame
+from .digest import METADATA_KEY, frame_digest, job_digest
+from .imageio import (
+    frame_complete,
+    frame_paths,
+    metadata_for,
+    remove_stale_temps,
+    temp_name_max_bytes,
+    write_frame,
+)
+
+WINDOWS_RESERVED = frozenset({"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)),
+                              *(f"LPT{i}" for i in range(1, 10))})
+"""File names Windows refuses whatever their extension (frames travel to artists' PCs)."""
+NAME_MAX_BYTES = 255
+"""Longest file name (one path component, UTF-8 bytes) on Linux, macOS and Windows."""
+_WINDOWS_FORBIDDEN = set('<>:"|?*')
 
 
-def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent) -> dict[str, str]:
-    """What a finished frame records (and what resume compares)."""
+def frame_stem(job: Job, frame: int) -> str:
+    """The file name (without extension) of ``frame``: ``output.name`` formatted."""
+    return job.output.name.format(frame=frame)
+
+
+def name_problem(stem: str) -> str | None:
+    """Why ``stem`` cannot be a frame's file name, or None.
+
+    A name is exactly one path component inside ``output.dir``: not empty, no ``/`` or
+    ``\\``, not ``.`` or ``..``, no NUL or control character, none of Windows' ``<>:"|?*``,
+    no trailing dot or space, not a Windows device name (CON, NUL, COM1 ...), and short
+    enough that its longest file (``<stem>.spectral.exr``, or the temporary name it is
+    written under first) stays within :data:`NAME_MAX_BYTES`.
+    """
+    if not stem:
+        return "is empty"
+    if "/" in stem or "\\" in stem:
+        return "contains a path separator (a frame's name is one file name in output.dir)"
+    if stem in (".", ".."):
+        return f"is '{stem}', a folder reference"
+    if any(ord(c) < 32 or ord(c) == 127 for c in stem):
+        return "contains a control character"
+    if any(c in _WINDOWS_FORBIDDEN for c in stem):
+        return 'contains one of <>:"|?* (not allowed in Windows file names)'
+    if stem[-1] in ". ":
+        return "ends with a dot or a space (Windows drops them)"
+    if stem.split(".")[0].rstrip(" ").upper() in WINDOWS_RESERVED:
+        return "is a Windows device name (CON, PRN, AUX, NUL, COM1-9, LPT1-9)"
+    longest = max(temp_name_max_bytes(p.name) for p in frame_paths(Path("."), stem).values())
+    if longest > NAME_MAX_BYTES:
+        return f"makes a {longest}-byte file name; at most {NAME_MAX_BYTES} bytes"
+    return None
+
+
+def check_frame_names(job: Job, frames: list[int]) -> None:
+    """Every frame's file name is valid and no two frames share one, before anything
+    renders (a UserError naming ``output.name`` and the job file, else nothing)."""
+    seen: dict[str, int] = {}
+    for frame in frames:
+        try:
+            stem = frame_stem(job, frame)
+        except (KeyError, IndexError, ValueError, AttributeError, TypeError) as e:
+            raise UserError(f"'{job.output.name}' cannot name frame {frame}: {e!r}",
+                            key="output.name", file=job.path) from None
+        problem = name_problem(stem)
+        if problem is not None:
+            raise UserError(f"frame {frame}'s name {stem!r} {problem}", key="output.name",
+                            file=job.path)
+        other = seen.setdefault(stem.casefold(), frame)
+        if other != frame:
+            raise UserError(f"frames {other} and {frame} would both be written as {stem!r}; "
+                            "use {frame} in the name", key="output.name", file=job.path)
+
+
+def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent,
+                   digest: str | None = None) -> dict[str, str]:
+    """What a finished frame records; ``relray:digest`` is what resume compares."""
     return metadata_for(frame, event.beta, float(event.tau), job.render.spp,
                         extra={"relray:spectral": job.render.spectral,
                                "relray:t_lab": repr(float(event.t)),
-                               "relray:seed": str(job.render.seed)})
+                               "relray:seed": str(job.render.seed),
+                               METADATA_KEY: digest or frame_digest(job, frame, event)})
+
+
+def frame_state(job: Job, frame: int, event: relativity.ShutterEvent,
+                base: str | None = None) -> str:
+    """"done", "stale" (finished, but by a different job, input file or renderer) or
+    "missing" (a file absent, or an interrupted write).
+
+    Every requested file must exist as a regular file; the frame's record (the EXR, else
+    the PNG, else the spectral EXR) must be complete and carry this frame's
+    :func:`.digest.frame_digest` (``base``: :func:`.digest.job_digest`, computed once).
+    """
+    paths = frame_paths(job.output.dir, frame_stem(job, frame))
+    if not all(is_regular_file(paths[f]) for f in job.output.formats):
+        return "missing"
+    record = next(paths[f] for f in ("exr", "png", "spectral-exr") if f in job.output.formats)
+    if frame_complete(record, {METADATA_KEY: frame_digest(job, frame, event, base)}):
+        return "done"
+    return "stale" if frame_complete(record, verify_pixels=False) else "missing"
 
 
 def frame_is_done(job: Job, frame: int, event: relativity.ShutterEvent) -> bool:
-    """A frame is done when every requested file exists and its EXR says it is complete."""
-    out = job.output
-    stem = out.name.format(frame=frame)
-    wanted = {"exr": f"{stem}.exr", "png": f"{stem}.png", "spectral-exr": f"{stem}.spectral.exr"}
-    if not all((out.dir / wanted[f]).exists() for f in out.formats):
-        return False
-    if "exr" in out.formats:
-        meta = frame_metadata(job, frame, event)
-        keys = ("relray:spp", "relray:beta", "relray:ct", "relray:spectral", "relray:seed")
-        return frame_complete(out.dir / wanted["exr"], {k: meta[k] for k in keys})
-    return True
+    """Whether the frame's files are finished and match the job as it is now."""
+    return frame_state(job, frame, event) == "done"
 
 
 @dataclass
@@ -45,6 +129,8 @@ class FramePlan:
     frames: list[int]
     todo: list[tuple[int, relativity.ShutterEvent]]
     stale_temps_removed: int = 0
+    stale: int = 0
+    """Frames in ``todo`` whose files were finished by a different job or renderer."""
 
     @property
     def done(self) -> int:
@@ -53,14 +139,19 @@ class FramePlan:
 
 
 def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
-    """The frames to render: all with ``overwrite``, else those not :func:`frame_is_done`.
+    """The frames to render: all with ``overwrite``, else those not done.
 
-    Also removes stale temporary files of interrupted writes from the output folder.
+    First checks every frame's file name (:func:`check_frame_names`); also removes stale
+    temporary files of interrupted writes from the output folder.
     """
     events = frame_events(job)
-    todo = [(f, ev) for f, ev in events if overwrite or not frame_is_done(job, f, ev)]
-    removed = remove_stale_temps(job.output.dir) if job.output.dir.exists() else 0
-    return FramePlan([f for f, _ in events], todo, removed)
+    check_frame_names(job, [f for f, _ in events])
+    base = job_digest(job)
+    states = {f: "missing" if overwrite else frame_state(job, f, ev, base) for f, ev in events}
+    todo = [(f, ev) for f, ev in events if states[f] != "done"]
+    removed = remove_stale_temps(job.output.dir) if job.output.dir.is_dir() else 0
+    stale = sum(1 for s in states.values() if s == "stale")
+    return FramePlan([f for f, _ in events], todo, removed, stale)
 
 
 def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
@@ -73,5 +164,5 @@ def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
     meta = frame_metadata(job, frame, event)
     meta["relray:seconds"] = f"{seconds:.3f}"
     meta["relray:doppler_range"] = f"{d_range[0]:.6g},{d_range[1]:.6g}"
-    return write_frame(job.output.dir, job.output.name.format(frame=frame), job.output.formats,
+    return write_frame(job.output.dir, frame_stem(job, frame), job.output.formats,
                        image, meta, job.output.exposure)

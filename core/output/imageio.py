@@ -165,14 +165,26 @@ def _set_metadata(spec: oiio.ImageSpec, metadata: Mapping[str, MetadataValue] | 
 
 
 # ---------------------------------------------------------------------- atomic writing
+HOST_TAG_MAX = 32
+PID_DIGITS_MAX = 10
+TOKEN_HEX = 8
+
+
 def _host_tag() -> str:
-    return re.sub(r"[^A-Za-z0-9]", "", socket.gethostname())[:32] or "host"
+    return re.sub(r"[^A-Za-z0-9]", "", socket.gethostname())[:HOST_TAG_MAX] or "host"
+
+
+def temp_name_max_bytes(name: str) -> int:
+    """The longest temporary name (UTF-8 bytes) :func:`temp_path_for` can give the file
+    ``name`` (any host, any process id)."""
+    extra = len(".") + len(".tmp-") + HOST_TAG_MAX + 1 + PID_DIGITS_MAX + 1 + TOKEN_HEX
+    return len(name.encode()) + extra
 
 
 def temp_path_for(path: Path) -> Path:
     """A fresh temporary name next to ``path``: ``.<stem>.tmp-<host>-<pid>-<hex><ext>``."""
     path = Path(path)
-    token = secrets.token_hex(4)
+    token = secrets.token_hex(TOKEN_HEX // 2)
     return path.with_name(f".{path.stem}.tmp-{_host_tag()}-{os.getpid()}-{token}{path.suffix}")
 
 
@@ -464,9 +476,9 @@ def read_exr(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
 def frame_complete(
     path: Path, expected: Mapping[str, object] | None = None, verify_pixels: bool = True
 ) -> bool:
-    """True iff ``path`` is a finished relray EXR matching ``expected``; never raises.
+    """True iff ``path`` is a finished relray EXR (or PNG) matching ``expected``; never raises.
 
-    Finished: it opens, has channels R, G, B, A, its ``relray:complete`` is "1" and (with
+    Finished: it opens, has channels R, G, B (and A), its ``relray:complete`` is "1" and (with
     ``verify_pixels``) every pixel reads back. ``expected`` maps metadata keys (a key
     without ":" means ``relray:<key>``) to values, compared as text in the form of
     :func:`metadata_for` or, failing that, as exactly equal numbers (so
@@ -482,7 +494,8 @@ def frame_complete(
             return False
         try:
             spec = inp.spec()
-            if not set(RGBA_CHANNELS) <= set(spec.channelnames):
+            needed = RGBA_CHANNELS if Path(path).suffix.lower() == ".exr" else RGBA_CHANNELS[:3]
+            if not set(needed) <= set(spec.channelnames):  # a PNG may be RGB
                 return False
             meta = {a.name: _attr_str(a.value) for a in spec.extra_attribs}
             if meta.get("relray:complete") != "1":
