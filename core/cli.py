@@ -205,16 +205,18 @@ def cmd_render(args: argparse.Namespace) -> int:
     reporter = default_reporter(not args.quiet, args.json_progress)
     cancel = threading.Event()
     failed: dict[int, str] = {}
+    code = 0
     try:
         with interrupts(cancel):
             check_farm_options(args)
             job = load_with_overrides(args)
             if args.scheduler is not None or args.workers is not None:
+                farm.quiet_dask_logging()
                 result = farm.render(job, scheduler=args.scheduler, workers=args.workers or 0,
                                      overwrite=args.overwrite, reporter=reporter,
                                      batches=args.batches,
                                      connect_timeout=args.connect_timeout)
-                written, failed = result.written, result.failed
+                written, failed, code = result.written, result.failed, result.exit_code
             else:
                 written = render_job(job, overwrite=args.overwrite, reporter=reporter,
                                      cancel=cancel.is_set)
@@ -233,7 +235,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         print(f"relray: error: {len(failed)} frame(s) failed: "
               f"{', '.join(str(f) for f in sorted(failed))}; the others are done, "
               "a rerun renders only the missing frames", file=sys.stderr)
-        return EXIT_FRAMES_FAILED
+        return code
     if not args.json_progress:
         for path in written:
             print(path)
@@ -290,6 +292,8 @@ def main(argv: list[str] | None = None) -> int:
         return commands[args.command](args)
     except UserError as e:
         return fail(str(e), EXIT_USER_ERROR)
+    except farm.SchedulerLostError as e:
+        return fail(str(e), EXIT_FRAMES_FAILED)
     except KeyboardInterrupt:
         return fail("interrupted", EXIT_INTERRUPTED, prefix="relray: ")
     except BrokenPipeError:

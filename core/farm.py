@@ -94,6 +94,7 @@ from typing import Any
 
 from . import user_cache_dir
 from .errors import UserError
+from .output.digest import frame_digest, job_digest
 from .output.frame_files import frame_is_done, plan_frames, write_film
 from .output.imageio import frame_paths
 from .physics.relativity import ShutterEvent
@@ -277,11 +278,36 @@ def _frame_files(job: Job, frame: int) -> list[str]:
     return [str(paths[f]) for f in job.output.formats]
 
 
+@dataclass(frozen=True)
+class TaskUserError:
+    """A task's user error (an output folder that is a file, say), returned instead of
+    raised: Dask would retry it, log its traceback on the worker and count it as a crash."""
+
+    message: str
+
+
+def _user_errors_returned(task: Callable[..., Any]) -> Callable[..., Any]:
+    """The task, with a :class:`UserError` returned as :class:`TaskUserError`."""
+    def wrapped(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return task(*args, **kwargs)
+        except UserError as e:
+            return TaskUserError(str(e))
+
+    wrapped.__name__, wrapped.__doc__ = task.__name__, task.__doc__
+    wrapped.__qualname__ = task.__qualname__
+    return wrapped
+
+
+@_user_errors_returned
 def render_frame_task(job: Job, run_id: str, frame: int, event: ShutterEvent, threads: int,
-                      overwrite: bool, slots: Mapping[str, int] | None = None
-                      ) -> dict[str, Any]:
-    """Worker: render one frame and write its files; returns paths and timings."""
-    if not overwrite and frame_is_done(job, frame, event):
+                      overwrite: bool, slots: Mapping[str, int] | None = None,
+                      digest: str | None = None) -> dict[str, Any]:
+    """Worker: render one frame and write its files; returns paths and timings.
+
+    ``digest`` is the client's resume digest of the frame: checked and recorded as is.
+    """
+    if not overwrite and frame_is_done(job, frame, event, digest):
         return {"frame": frame, "paths": _frame_files(job, frame), "seconds": 0.0,
                 "d_range": None, "skipped": True}
     renderer = worker_renderer(job, run_id, task_threads(threads, slots))
@@ -289,11 +315,13 @@ def render_frame_task(job: Job, run_id: str, frame: int, event: ShutterEvent, th
     film, stats = renderer.render(event, frame,
                                   progress=_test_hook(frame, s.width * s.height * s.spp))
     d_range = (stats.d_min, stats.d_max)
-    paths = write_film(job, frame, event, film, renderer.to_rgb, stats.seconds, d_range)
+    paths = write_film(job, frame, event, film, renderer.to_rgb, stats.seconds, d_range,
+                       digest)
     return {"frame": frame, "paths": [str(p) for p in paths], "seconds": stats.seconds,
             "d_range": d_range, "skipped": False}
 
 
+@_user_errors_returned
 def render_batch_task(job: Job, run_id: str, frame: int, event: ShutterEvent, threads: int,
                       samples: tuple[int, int], slots: Mapping[str, int] | None = None
                       ) -> tuple[Film, float, float, float]:
@@ -314,6 +342,13 @@ class FarmResult:
     rendered: list[int] = field(default_factory=list)
     failed: dict[int, str] = field(default_factory=dict)
     skipped: int = 0
+    user_errors: set[int] = field(default_factory=set)
+    """Failed frames whose cause is the user's to fix (exit code 2 rather than 1)."""
+
+    @property
+    def exit_code(self) -> int:
+        """0 all done, 2 a frame failed by a user error, 1 a frame failed otherwise."""
+        return 2 if self.user_errors else 1 if self.failed else 0
 
 
 def scheduler_address(text: str) -> str:
@@ -329,6 +364,26 @@ def scheduler_address(text: str) -> str:
             or not 0 < int(port) < 65536:
         raise UserError(f"expected tcp://HOST:PORT, got {text!r}", key="--scheduler")
     return f"{scheme}://{host}:{port}"
+
+
+def quiet_dask_logging() -> None:
+    """Silence Dask's own logging in this process (for the CLI).
+
+    Dask logs the exceptions it also hands back (a lost scheduler's reconnection
+    tracebacks, a failed task); the CLI reports each as one line of its own. Dask sets
+    levels on its loggers when imported, so each one is set here, after the import.
+    """
+    import distributed  # noqa: F401 - configures the loggers this then quiets
+
+    for name in list(logging.root.manager.loggerDict):
+        if name == "distributed" or name.startswith("distributed."):
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+def close_quietly(client: Any, seconds: float = 5.0) -> None:
+    """Close a Dask client within ``seconds``, whatever state its scheduler is in."""
+    with contextlib.suppress(Exception):
+        within(seconds, lambda: client.close(timeout=seconds))
 
 
 def within(seconds: float, call: Callable[[], Any]) -> Any:
@@ -390,14 +445,14 @@ def dask_client(scheduler: str | None = None, workers: int = 0,
         try:
             yield client
         finally:
-            client.close()
+            close_quietly(client)
         return
     if workers < 1:
         raise UserError(f"need at least 1 worker, got {workers}", key="--workers",
                         file=job_path)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                            host="127.0.0.1", scheduler_port=0, **LOOPBACK_NO_DASHBOARD,
-                           silence_logs=logging.ERROR)
+                           silence_logs=logging.CRITICAL)
     try:
         client = Client(cluster, set_as_default=False)
         try:
@@ -408,8 +463,28 @@ def dask_client(scheduler: str | None = None, workers: int = 0,
         cluster.close()
 
 
+class SchedulerLostError(Exception):
+    """The Dask scheduler went away mid-run (killed, its node down, the network cut)."""
+
+
+def _check_scheduler(client: Any, exc: BaseException) -> None:
+    """Raise :class:`SchedulerLostError` when ``exc`` means the client lost its scheduler."""
+    reason = str(exc)
+    if "scheduler-connection-lost" in reason or getattr(client, "status", "running") not in (
+            "running", "connecting", "newly-created"):
+        address = getattr(getattr(client, "scheduler", None), "address", None) or "?"
+        raise SchedulerLostError(f"lost the Dask scheduler {address} (it stopped or the network "
+                            "failed); finished frames stay, a rerun resumes") from None
+
+
+class _FrameUserError(Exception):
+    """A frame's user error, as its one-line message (no exception type prefix)."""
+
+
 def _message(exc: BaseException) -> str:
     text = " ".join(str(exc).split())
+    if isinstance(exc, _FrameUserError):
+        return text
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
@@ -445,13 +520,15 @@ def _render_frames(job: Job, client: Any, todo: list[tuple[int, ShutterEvent]], 
     from distributed import as_completed
 
     slots = host_slots(client)
+    base = job_digest(job)
     frame_of: dict[str, int] = {}
     futures = []
     for i, (frame, ev) in enumerate(todo):
         key = f"relray-frame-{frame}-{run_id}"
         frame_of[key] = frame
         futures.append(client.submit(render_frame_task, job, run_id, frame, ev, threads,
-                                     overwrite, slots, key=key, pure=False, retries=TASK_RETRIES,
+                                     overwrite, slots, frame_digest(job, frame, ev, base),
+                                     key=key, pure=False, retries=TASK_RETRIES,
                                      priority=-i))
     pending = as_completed(futures, loop=client.loop)
     del futures
@@ -460,19 +537,26 @@ def _render_frames(job: Job, client: Any, todo: list[tuple[int, ShutterEvent]], 
             frame = frame_of[fut.key]
             try:
                 out = fut.result()
+                if isinstance(out, TaskUserError):
+                    result.user_errors.add(frame)
+                    raise _FrameUserError(out.message)
             except Exception as exc:
+                _check_scheduler(client, exc)
                 result.failed[frame] = _message(exc)
                 reporter.advance(1)
-                reporter.error(frame, result.failed[frame])
+                reporter.error(frame, result.failed[frame],
+                               kind="user" if frame in result.user_errors else "frame")
                 continue
             finally:
-                fut.release()
+                with contextlib.suppress(Exception):
+                    fut.release()
             result.written += [Path(p) for p in out["paths"]]
             result.rendered.append(frame)
             reporter.advance(1)
             reporter.frame_done(frame, out["paths"], out["seconds"], out["d_range"])
     except BaseException:
-        client.cancel(list(pending.futures))
+        with contextlib.suppress(Exception):
+            within(5.0, lambda: client.cancel(list(pending.futures)))
         raise
 
 
@@ -500,14 +584,21 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
     try:
         for fut in pending:
             try:
-                arrived[index[fut.key]] = fut.result()
+                got = fut.result()
+                if isinstance(got, TaskUserError):
+                    result.user_errors.add(frame)
+                    raise _FrameUserError(got.message)
+                arrived[index[fut.key]] = got
             except Exception as exc:
+                _check_scheduler(client, exc)
                 client.cancel(list(pending.futures))
                 result.failed[frame] = f"sample batch {ranges[index[fut.key]]}: {_message(exc)}"
-                reporter.error(frame, result.failed[frame])
+                reporter.error(frame, result.failed[frame],
+                               kind="user" if frame in result.user_errors else "frame")
                 return
             finally:
-                fut.release()
+                with contextlib.suppress(Exception):
+                    fut.release()
             reporter.advance(1)
             while next_k in arrived:  # merge in batch order: the same sums for any workers
                 film, _, lo, hi = arrived.pop(next_k)
@@ -518,7 +609,8 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
                     merged.merge(film)
                 next_k += 1
     except BaseException:
-        client.cancel(list(pending.futures))
+        with contextlib.suppress(Exception):
+            within(5.0, lambda: client.cancel(list(pending.futures)))
         raise
     seconds = time.perf_counter() - t0
     paths = write_film(job, frame, ev, merged, sensor_to_rgb(job.render.spectral), seconds,
@@ -546,7 +638,7 @@ def render(job: Job, *, scheduler: str | None = None, workers: int = 0,
                                 scheduler=scheduler_address(scheduler) if scheduler else None,
                                 workers=n_workers)
         status = "failed" if result.failed else "ok"
-        reporter.finish(status, time.perf_counter() - t0, 1 if result.failed else 0)
+        reporter.finish(status, time.perf_counter() - t0, result.exit_code)
     return result
 
 
@@ -556,8 +648,9 @@ def with_render_threads(job: Job, threads: int) -> Job:
 
 
 __all__ = [
-    "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "dask_client",
+    "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "SchedulerLostError",
+    "TaskUserError", "close_quietly", "dask_client", "host_slots", "quiet_dask_logging",
     "render", "render_batch_task", "render_command", "render_frame_task", "render_on_dask",
-    "host_slots", "sample_batches", "scheduler_address", "subprocess_env", "task_threads",
+    "sample_batches", "scheduler_address", "subprocess_env", "task_threads", "within",
     "with_render_threads", "worker_renderer",
 ]

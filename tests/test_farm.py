@@ -7,6 +7,7 @@ of ``core/farm.py`` (``RELRAY_TEST_PAUSE_FRAME``, ``RELRAY_TEST_CRASH_FRAME``).
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 import signal
@@ -241,7 +242,110 @@ def test_unreachable_scheduler_is_a_user_error(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("greeting", [b"", b"HTTP/1.1 200 OK\r\n\r\n"])
+def test_a_silent_or_foreign_scheduler_keeps_the_connect_timeout(tmp_path, capsys, greeting):
+    """A peer that accepts the connection and never answers (or answers something that is
+    not Dask) used to hang forever: now --connect-timeout holds, one line, exit 2."""
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    held = []
+
+    def accept() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                held.append(conn)
+                conn.sendall(greeting)
+
+    threading.Thread(target=accept, daemon=True).start()
+    job = write_job(tmp_path, 2)
+    t0 = time.perf_counter()
+    try:
+        code = cli.main(["render", str(job), "--quiet", "--scheduler",
+                         f"tcp://127.0.0.1:{server.getsockname()[1]}", "--connect-timeout", "1"])
+    finally:
+        server.close()
+        for c in held:
+            c.close()
+    assert time.perf_counter() - t0 < 20
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert "--scheduler" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_output_folder_that_is_a_file_fails_before_any_task(tmp_path, capsys):
+    job = write_job(tmp_path, 2)
+    (tmp_path / "out").write_text("not a folder")
+    code = cli.main(["render", str(job), "--quiet", "--workers", "1"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "output.dir" in err[0] and "not a folder" in err[0]
+
+
+def test_a_user_error_on_a_worker_is_one_line_per_frame_and_exit_2(tmp_path, client):
+    """A user error that only shows on the workers (here: the output folder became a file
+    after the client checked it) is returned, not raised: no retry, no worker traceback,
+    one line per failed frame, exit code 2."""
+    job = load(write_job(tmp_path, 2))
+    (tmp_path / "out").write_text("not a folder")
+    result = farm.FarmResult()
+    farm._render_frames(job, client, frame_events(job), "run-user-error", 1, False,
+                        progress.Reporter(), result)
+    assert sorted(result.failed) == [1, 2] and result.user_errors == {1, 2}
+    assert result.exit_code == 2
+    for message in result.failed.values():
+        assert message.startswith(str(job.path)) and "output.dir" in message
+        assert "\n" not in message and "UserError" not in message
+
+
+def test_the_subprocess_cli_prints_no_dask_traceback(tmp_path):
+    job = write_job(tmp_path, 2)
+    (tmp_path / "out").write_text("not a folder")
+    r = run_cli("render", str(job), "--quiet", "--workers", "1")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_a_killed_scheduler_is_a_clean_message(tmp_path):
+    """The scheduler goes away mid-render: one line naming it, exit 1, no traceback;
+    finished frames stay and a rerun resumes."""
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = dict(os.environ, DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="3s")
+    sched = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler",
+                              "--host", "127.0.0.1", "--port", str(port),
+                              "--dashboard-address", "127.0.0.1:0"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                               "--nthreads", "1", "--no-dashboard"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    try:
+        text = TINY.replace("spp = 2", "spp = 256").replace("width = 24", "width = 96")
+        job = write_job(tmp_path, 40, text=text.replace("height = 16", "height = 64"))
+        cli_proc = subprocess.Popen([sys.executable, "-m", "relray", "render", str(job),
+                                     "--json-progress", "--scheduler", address,
+                                     "--connect-timeout", "30"],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                    env=env)
+        deadline = time.time() + 120
+        while time.time() < deadline and not list((tmp_path / "out").glob("*.exr")):
+            time.sleep(0.2)
+        sched.kill()
+        out, err = cli_proc.communicate(timeout=180)
+    finally:
+        for proc in (worker, sched):
+            proc.kill()
+            proc.wait()
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert cli_proc.returncode == 1 and len(lines) == 1, err
+    assert address in lines[0] and "scheduler" in lines[0]
+
+
 def test_a_scheduler_without_workers_is_a_user_error(tmp_path, capsys):
+
     from distributed import LocalCluster
 
     job = write_job(tmp_path, 2)
@@ -425,3 +529,21 @@ def test_sigterm_cancels_a_local_render_cleanly(tmp_path):
     job = load(path)
     assert sorted(complete_frames(job)) == ev[-1]["rendered"]
     assert not [q for q in job.output.dir.iterdir() if ".tmp-" in q.name]
+
+
+def test_a_worker_records_the_clients_digest(tmp_path, monkeypatch):
+    """Workers may run other code than the client (a node updated mid-run): a task checks
+    and records the digest the client computed, so the client's next plan agrees."""
+    from relray.core.output import digest
+    from relray.core.output.frame_files import frame_is_done
+
+    job = load(write_job(tmp_path, 1))
+    frame, ev = frame_events(job)[0]
+    client_digest = digest.frame_digest(job, frame, ev)
+    monkeypatch.setattr(digest, "renderer_identity", lambda: "9.9.9+a-worker-build")
+    out = farm.render_frame_task(job, "run", frame, ev, 1, False, None, client_digest)
+    assert not out["skipped"]
+    assert frame_is_done(job, frame, ev, client_digest)
+    assert not frame_is_done(job, frame, ev)  # the worker's own digest differs
+    monkeypatch.undo()
+    assert frame_is_done(job, frame, ev)

@@ -6,6 +6,7 @@ metadata they record, whether a frame is already done (resume: the recorded
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -89,6 +90,20 @@ def check_frame_names(job: Job, frames: list[int]) -> None:
                             "use {frame} in the name", key="output.name", file=job.path)
 
 
+def check_output_dir(job: Job) -> None:
+    """``output.dir`` is, or can be made, a folder this process may write in: checked
+    before rendering, so a folder that is a file fails at once (on a farm, once, not on
+    every worker), without creating anything."""
+    probe = job.output.dir
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise UserError(f"{probe} is a file, not a folder", key="output.dir", file=job.path)
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise UserError(f"cannot write in {probe}: permission denied", key="output.dir",
+                        file=job.path)
+
+
 def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent,
                    digest: str | None = None) -> dict[str, str]:
     """What a finished frame records; ``relray:digest`` is what resume compares."""
@@ -100,26 +115,31 @@ def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent,
 
 
 def frame_state(job: Job, frame: int, event: relativity.ShutterEvent,
-                base: str | None = None) -> str:
+                base: str | None = None, digest: str | None = None) -> str:
     """"done", "stale" (finished, but by a different job, input file or renderer) or
     "missing" (a file absent, or an interrupted write).
 
     Every requested file must exist as a regular file; the frame's record (the EXR, else
-    the PNG, else the spectral EXR) must be complete and carry this frame's
-    :func:`.digest.frame_digest` (``base``: :func:`.digest.job_digest`, computed once).
+    the PNG, else the spectral EXR) must be complete and carry ``digest``, by default
+    this frame's :func:`.digest.frame_digest` (``base``: :func:`.digest.job_digest`,
+    computed once). A farm passes the client's digest to its workers, so that what a
+    worker records is what the client compares, whatever code the worker runs.
     """
     paths = frame_paths(job.output.dir, frame_stem(job, frame))
     if not all(is_regular_file(paths[f]) for f in job.output.formats):
         return "missing"
     record = next(paths[f] for f in ("exr", "png", "spectral-exr") if f in job.output.formats)
-    if frame_complete(record, {METADATA_KEY: frame_digest(job, frame, event, base)}):
+    digest = digest or frame_digest(job, frame, event, base)
+    if frame_complete(record, {METADATA_KEY: digest}):
         return "done"
     return "stale" if frame_complete(record, verify_pixels=False) else "missing"
 
 
-def frame_is_done(job: Job, frame: int, event: relativity.ShutterEvent) -> bool:
-    """Whether the frame's files are finished and match the job as it is now."""
-    return frame_state(job, frame, event) == "done"
+def frame_is_done(job: Job, frame: int, event: relativity.ShutterEvent,
+                  digest: str | None = None) -> bool:
+    """Whether the frame's files are finished and match the job as it is now (or
+    ``digest``: see :func:`frame_state`)."""
+    return frame_state(job, frame, event, digest=digest) == "done"
 
 
 @dataclass
@@ -141,11 +161,13 @@ class FramePlan:
 def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
     """The frames to render: all with ``overwrite``, else those not done.
 
-    First checks every frame's file name (:func:`check_frame_names`); also removes stale
+    First checks every frame's file name (:func:`check_frame_names`) and the output
+    folder (:func:`check_output_dir`); also removes stale
     temporary files of interrupted writes from the output folder.
     """
     events = frame_events(job)
     check_frame_names(job, [f for f, _ in events])
+    check_output_dir(job)
     base = job_digest(job)
     states = {f: "missing" if overwrite else frame_state(job, f, ev, base) for f, ev in events}
     todo = [(f, ev) for f, ev in events if states[f] != "done"]
@@ -155,14 +177,21 @@ def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
 
 
 def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
-               to_rgb: np.ndarray, seconds: float, d_range: tuple[float, float]) -> list:
-    """Resolve ``film`` and write the frame's files atomically (EXR last); return the paths."""
+               to_rgb: np.ndarray, seconds: float, d_range: tuple[float, float],
+               digest: str | None = None) -> list:
+    """Resolve ``film`` and write the frame's files atomically (EXR last); return the paths.
+    They record ``digest`` (default: :func:`.digest.frame_digest` of this process)."""
     if film.nonfinite_samples:
         logging.getLogger("relray").warning("frame %d: %d non-finite samples dropped", frame,
                                             film.nonfinite_samples)
     image = film.resolve(to_rgb)
-    meta = frame_metadata(job, frame, event)
+    meta = frame_metadata(job, frame, event, digest)
     meta["relray:seconds"] = f"{seconds:.3f}"
     meta["relray:doppler_range"] = f"{d_range[0]:.6g},{d_range[1]:.6g}"
-    return write_frame(job.output.dir, frame_stem(job, frame), job.output.formats,
-                       image, meta, job.output.exposure)
+    try:
+        return write_frame(job.output.dir, frame_stem(job, frame), job.output.formats,
+                           image, meta, job.output.exposure)
+    except UserError as e:  # name the job file, and the file written as part of the message
+        if e.file is None or e.file == str(job.path):
+            raise
+        raise UserError(f"{e.file}: {e.detail}", key=e.key, file=job.path) from None

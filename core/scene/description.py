@@ -161,6 +161,8 @@ class ObjectSpec:
     ==========  ===========================================================================
     shape       params (*required* first)
     ==========  ===========================================================================
+    (every)     ``shape`` (*required*: sphere, box, quad, mesh), ``material`` (*required*),
+                ``name`` (str, "objects[i]"), ``velocity`` [vx, vy, vz] (0 for now)
     sphere      ``center`` (3,), ``radius`` > 0; ``subdivisions`` int 0..8 (default 5)
     box         ``center`` (3,), ``size`` scalar or (3,) > 0 (stored (3,));
                 ``rotation_z`` degrees (0)

@@ -387,6 +387,19 @@ _LIGHT_KEYS: dict[str, tuple[str, ...]] = {
     "area": ("type", "name", "position", "direction", "color", "power", "size", "up"),
 }
 
+
+def accepted_keys() -> dict[str, tuple[str, ...]]:
+    """Every key the validator accepts, by table ("render", "objects (sphere)", ...):
+    what docs/job-reference.md must list (tests/test_docs.py checks it)."""
+    keys = {"render": _RENDER_KEYS, "output": _OUTPUT_KEYS, "camera": _CAMERA_KEYS,
+            "motion": _MOTION_KEYS, "scene": _SCENE_KEYS, "materials": _MATERIAL_KEYS}
+    for shape, (required, optional) in _SHAPE_PARAMS.items():
+        keys[f"objects ({shape})"] = _OBJECT_COMMON + required + optional
+    for kind, light_keys in _LIGHT_KEYS.items():
+        keys[f"lights ({kind})"] = light_keys
+    return keys
+
+
 DEFAULT_CAMERA_POSITION = (0.0, -3.9, 1.0)
 DEFAULT_LOOK_AT = (0.0, 0.0, 1.0)
 DEFAULT_UP = (0.0, 0.0, 1.0)
