@@ -20,8 +20,12 @@ oversubscribe the machine: unless the environment says otherwise, BLAS and OpenM
 pinned to one thread here, before numpy is first imported.
 """
 
+import atexit
 import hashlib
+import logging
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -63,10 +67,36 @@ def kernel_cache_dir(environ=os.environ) -> str:
     return os.path.join(base, "relray-" + digest[:16])
 
 
+def writable_dir(path: str) -> str | None:
+    """Why ``path`` cannot hold cache files (it is created if missing), or None."""
+    try:
+        os.makedirs(path, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=path, prefix=".relray-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        return e.strerror or str(e)
+    return None
+
+
+def cache_fallback(path: str, what: str) -> str:
+    """``path`` if it can hold cache files; else a fresh temporary folder (deleted at
+    exit: no cache across runs), with one warning naming the folder and the reason."""
+    why = writable_dir(path)
+    if why is None:
+        return path
+    logging.getLogger("relray").warning(  # at import: before any logging set-up, hence
+        "relray: warning: cannot use the cache folder %s (%s): %s without a cache "
+        "(set XDG_CACHE_HOME or NUMBA_CACHE_DIR to a writable folder)", path, why, what)
+    tmp = tempfile.mkdtemp(prefix="relray-cache-")
+    atexit.register(shutil.rmtree, tmp, True)
+    return tmp
+
+
 def _use_kernel_cache() -> None:
     import numba
 
-    numba.config.CACHE_DIR = kernel_cache_dir()
+    numba.config.CACHE_DIR = cache_fallback(kernel_cache_dir(), "kernels are compiled")
 
 
 _use_kernel_cache()

@@ -27,7 +27,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from . import farm
+from . import farm, resources
 from .errors import UserError
 from .output.contact import write_contact_sheet
 from .output.frame_files import check_frame_names
@@ -47,8 +47,6 @@ EXIT_BROKEN_PIPE = 141
 shell reports a command killed by SIGPIPE, but silently and without dying by it."""
 DEBUG_ENV = "RELRAY_DEBUG"
 """Set to 1 to get the Python traceback of an internal error."""
-MAX_THREADS_PER_CORE = 4
-"""``--threads`` above this many per core is refused (more threads only add overhead)."""
 
 
 def parse_frames(text: str, file: Path | None = None) -> tuple[int, int]:
@@ -170,8 +168,10 @@ def check_farm_options(args: argparse.Namespace) -> None:
         raise UserError("give either --scheduler or --workers, not both", key="--workers")
     if args.scheduler is not None and not args.scheduler.strip():
         raise UserError("expected tcp://HOST:PORT, got ''", key="--scheduler")
-    if args.workers is not None and not 1 <= args.workers <= 1024:
-        raise UserError(f"must be 1..1024, got {args.workers}", key="--workers")
+    most = resources.max_threads()
+    if args.workers is not None and not 1 <= args.workers <= most:
+        raise UserError(f"must be 1..{most} ({resources.MAX_THREADS_PER_CORE} per usable core "
+                        f"here), got {args.workers}", key="--workers")
     if not 1 <= args.batches <= 65536:
         raise UserError(f"must be 1..65536, got {args.batches}", key="--batches")
     if not 0.0 < args.connect_timeout <= 3600.0:

@@ -24,3 +24,39 @@ def test_kernel_cache_dir_is_keyed_and_used():
     home = core.kernel_cache_dir({"XDG_CACHE_HOME": "/c"})
     assert home == str(Path("/c", "relray", "numba", key))
     assert Path(numba.config.CACHE_DIR).name == key
+
+
+def test_an_unusable_cache_folder_falls_back_with_a_warning(tmp_path, caplog):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    assert core.writable_dir(str(tmp_path / "new" / "dir")) is None  # created
+    assert core.writable_dir(str(blocker / "sub")) is not None
+    with caplog.at_level("WARNING", logger="relray"):
+        got = core.cache_fallback(str(blocker / "sub"), "kernels are compiled")
+    assert got != str(blocker / "sub") and core.writable_dir(got) is None
+    assert "cannot use the cache folder" in caplog.text and str(blocker) in caplog.text
+    assert core.cache_fallback(str(tmp_path / "ok"), "x") == str(tmp_path / "ok")
+
+
+def test_the_command_runs_with_an_unusable_cache_folder(tmp_path):
+    """XDG_CACHE_HOME under a file (so even root cannot create it): a warning line per
+    cache, then the command works (exit 0), without a traceback."""
+    import os
+    import subprocess
+    import sys
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    job = tmp_path / "job.toml"
+    job.write_text('[render]\nwidth = 8\nheight = 6\nspp = 1\n[[materials]]\nname = "m"\n'
+                   'base_color = [0.5, 0.2, 0.1]\n[[objects]]\nshape = "box"\n'
+                   'center = [0, 0, 1]\nsize = 1\nmaterial = "m"\n')
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(XDG_CACHE_HOME=str(blocker), RELRAY_DISK_CACHE="1")
+    r = subprocess.run([sys.executable, "-m", "relray", "render", str(job), "--quiet"],
+                       capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    warnings = [line for line in r.stderr.splitlines() if "warning" in line]
+    assert any("cannot use the cache folder" in w for w in warnings), r.stderr
+    assert all(w.startswith("relray: warning: ") for w in warnings), r.stderr

@@ -371,6 +371,8 @@ def test_json_progress_reports_user_errors(tmp_path):
 
 @pytest.mark.parametrize(("args", "key"), [
     (["--workers", "0"], "--workers"),
+    (["--workers", "4000"], "--workers"),
+    (["--threads", "4000"], "--threads"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers"),
     (["--scheduler", "ftp://x:1"], "--scheduler"),
     (["--batches", "0", "--workers", "1"], "--batches"),

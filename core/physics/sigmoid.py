@@ -28,6 +28,7 @@ in-memory / on-disk cache of fitted coefficients).
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 import tempfile
 from dataclasses import dataclass
@@ -278,6 +279,7 @@ class CoefficientCache:
         self.version = version
         self.memory: dict[tuple, np.ndarray] = {}
         self._loaded: set[str] = set()
+        self._warned = False
 
     def path(self, tag: str) -> Path | None:
         """The cache file for a model tag, or None when the disk cache is disabled."""
@@ -317,5 +319,10 @@ class CoefficientCache:
             finally:
                 if os.path.exists(tmp):
                     os.unlink(tmp)
-        except Exception:  # noqa: BLE001 - an unwritable cache only costs a refit
-            pass
+        except Exception as e:  # noqa: BLE001 - an unwritable cache only costs a refit
+            if not self._warned:
+                self._warned = True
+                why = getattr(e, "strerror", None) or " ".join(str(e).split())
+                logging.getLogger("relray").warning(
+                    "warning: cannot write the spectrum cache %s (%s): spectra are fitted "
+                    "again on every run", path, why)
