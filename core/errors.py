@@ -26,4 +26,13 @@ class UserError(Exception):
         if self.key:
             where.append(f"key '{self.key}'")
         prefix = ": ".join(where)
-        return f"{prefix}: {self.detail}" if prefix else self.detail
+        return one_line(f"{prefix}: {self.detail}" if prefix else self.detail)
+
+
+_CONTROL = {c: f"\\x{c:02x}" for c in (*range(32), 127)} | {10: "\\n", 13: "\\r", 9: "\\t"}
+
+
+def one_line(text: str) -> str:
+    """``text`` with control characters (newlines in a file name or a quoted value)
+    escaped, so that a message is always exactly one line."""
+    return text.translate(_CONTROL)

@@ -8,7 +8,10 @@ from pathlib import Path
 import numpy as np
 import pygltflib as g
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
+from stress_config import STRESS
 
 from relray.core.errors import UserError
 from relray.core.scene import geometry as scene
@@ -499,3 +502,48 @@ def test_buffer_uri_that_is_a_device_or_folder_is_refused(tmp_path: Path) -> Non
         (tmp_path / "s.gltf").write_text(json.dumps(doc))
         with pytest.raises(UserError, match=why):
             gltf.load_gltf(tmp_path / "s.gltf")
+
+
+# A fuzzer over the hand-written document: any field replaced by a hostile value must
+# load or be one UserError naming scene.file, never another exception, never a hang.
+
+_PATHS = [("buffers", 0, "byteLength"), ("bufferViews", 0, "buffer"),
+          ("bufferViews", 0, "byteOffset"), ("bufferViews", 0, "byteLength"),
+          ("bufferViews", 0, "byteStride"), ("accessors", 0, "bufferView"),
+          ("accessors", 0, "byteOffset"), ("accessors", 0, "componentType"),
+          ("accessors", 0, "count"), ("accessors", 0, "type"), ("nodes", 0, "mesh"),
+          ("nodes", 0, "children"), ("nodes", 0, "matrix"), ("nodes", 0, "scale"),
+          ("scenes", 0, "nodes"), ("meshes", 0, "primitives"), ("nodes", 0, "camera")]
+_HOSTILE = st.one_of(st.integers(-2**70, 2**70), st.floats(allow_nan=False),
+                     st.booleans(), st.none(), st.text(max_size=4),
+                     st.lists(st.integers(-3, 3), max_size=17), st.just({}))
+
+
+def _fuzz_one(tmp_path: Path, edits: list) -> None:
+    doc = tri_doc(2)
+    doc["scenes"] = [{"nodes": [0]}]
+    doc["nodes"][0]["children"] = [1]
+    for (table, index, key), value in edits:
+        doc[table][index][key] = value
+    try:
+        load_doc(tmp_path, doc)
+    except UserError as e:
+        assert e.key == "scene.file" and "\n" not in str(e)
+
+
+_fuzz = given(edits=st.lists(st.tuples(st.sampled_from(_PATHS), _HOSTILE), min_size=1,
+                             max_size=3))
+
+
+@settings(max_examples=80, deadline=None)
+@_fuzz
+def test_fuzzed_documents_are_loaded_or_refused(tmp_path_factory, edits) -> None:
+    _fuzz_one(tmp_path_factory.mktemp("g"), edits)
+
+
+@pytest.mark.stress
+@pytest.mark.skipif(not STRESS, reason="make stress: RELRAY_STRESS=1")
+@settings(max_examples=3000, deadline=None)
+@_fuzz
+def test_fuzzed_documents_are_loaded_or_refused_long(tmp_path_factory, edits) -> None:
+    _fuzz_one(tmp_path_factory.mktemp("g"), edits)

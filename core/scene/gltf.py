@@ -366,8 +366,7 @@ def _walk_nodes(doc: dict[str, Any]) -> Iterator[tuple[int, dict[str, Any], np.n
         seen.add(index)
         node = nodes[index]
         world = parent @ _local_matrix(node)
-        if not np.all(np.isfinite(world)):
-            raise _CorruptError(f"nodes[{index}] has a non-finite transform")
+        check_coordinates(world, f"nodes[{index}]: its world transform", _CorruptError)
         yield index, node, world
         stack.extend((_index(c, len(nodes), f"nodes[{index}].children[]"), world)
                      for c in reversed(_children(node)))
@@ -575,8 +574,11 @@ def _user_error(path: Path, key: str, job_file: str | Path | None, reason: str) 
 
 
 def _guarded(path: Path, key: str, job_file: str | Path | None, func: Any) -> Any:
+    """``func()`` with every problem of the file as one UserError. Floating-point
+    overflow is silent here: non-finite or out-of-range results are checked explicitly."""
     try:
-        return func()
+        with np.errstate(all="ignore"):
+            return func()
     except _CorruptError as e:
         raise _user_error(path, key, job_file, str(e)) from None
     except OSError as e:
