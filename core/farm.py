@@ -129,8 +129,10 @@ def render_command(job_path: str | Path, *, scheduler: str | None = None,
                    extra: Sequence[str] = (), python: str | None = None) -> list[str]:
     """The argument list that renders a job in a child process with JSON progress.
 
-    Runs this installation's CLI module with ``python`` (default: this interpreter; in
-    Blender, ``sys.executable`` is Blender's Python). Use with :func:`subprocess_env`.
+    Runs this installation's command (``python -m relray``: its signal handlers are in
+    place before the heavy imports, so a cancel during start-up is a clean exit 130) with
+    ``python`` (default: this interpreter; in Blender, ``sys.executable`` is Blender's
+    Python). Use with :func:`subprocess_env`.
     """
     module, _ = _cli_module()
     argv = [python or sys.executable, "-m", module, "render", str(job_path), "--json-progress"]
@@ -144,11 +146,11 @@ def render_command(job_path: str | Path, *, scheduler: str | None = None,
 
 
 def _cli_module() -> tuple[str, Path | None]:
-    """(the CLI module for ``-m``, a folder the child must import it from, or None)."""
+    """(the package to run with ``-m``, a folder the child must import it from, or None)."""
     if (__package__ or "relray.core").split(".")[0] == "relray":
-        return "relray.core.cli", None  # installed (or editable): importable by name
+        return "relray", None  # installed (or editable): importable by name
     pkg = Path(__file__).resolve().parents[1]  # inside Blender: bl_ext.<repo>.<folder>.core
-    return f"{pkg.name}.core.cli", pkg.parent
+    return pkg.name, pkg.parent
 
 
 def subprocess_env(base: dict[str, str] | None = None) -> dict[str, str]:

@@ -200,7 +200,7 @@ def build_test_zip(target: Path) -> Path:
         ignore = shutil.ignore_patterns("__pycache__", ".*", "*.pyc", "dist", "build", "out",
                                         "tests", "bench", "docs", "*.egg-info", "packaging.py")
         src.mkdir()
-        for item in ("__init__.py", "core", "relblend", "presets", "README.md"):
+        for item in ("__init__.py", "__main__.py", "core", "relblend", "presets", "README.md"):
             p = ROOT / item
             if p.is_dir():
                 shutil.copytree(p, src / item, ignore=ignore)

@@ -183,7 +183,7 @@ def test_scheduler_address():
 
 def test_render_command_and_env_run_the_cli():
     argv = farm.render_command("job.toml", scheduler="tcp://h:1", frames=(3, 5), overwrite=True)
-    assert argv[1:4] == ["-m", "relray.core.cli", "render"]
+    assert argv[1:4] == ["-m", "relray", "render"]
     assert argv[4:] == ["job.toml", "--json-progress", "--scheduler", "tcp://h:1",
                         "--frames", "3-5", "--overwrite"]
     env = farm.subprocess_env({"PATH": os.environ.get("PATH", "")})

@@ -99,7 +99,7 @@ def test_the_child_runs_the_cli_with_its_own_kernel_cache(ext):
     process (bl_ext.*) would not load there, so it gets a cache folder of its own."""
     farm_run = ext_module("relblend.farm_run")
     argv, env = farm_run.render_command("job.toml")
-    assert argv[1:] == ["-m", "relray.core.cli", "render", "job.toml", "--json-progress"]
+    assert argv[1:] == ["-m", "relray", "render", "job.toml", "--json-progress"]
     assert Path(env["NUMBA_CACHE_DIR"]).name in ("relray-cli", "numba-cli")
     assert env["NUMBA_CACHE_DIR"] != os.environ.get("NUMBA_CACHE_DIR")
     if farm_run.has_dask():
