@@ -67,13 +67,6 @@ events and the exit codes). To cancel, send SIGINT or SIGTERM (Windows:
 terminate it): the frame in flight is abandoned, finished frames stay, and the next run
 resumes. :func:`render_command` builds the argument list, :func:`subprocess_env` the
 environment and :func:`.progress.parse_event` reads a line back.
-
-Test hooks (read by this module on the worker, for the fault-tolerance tests only)
-----------------------------------------------------------------------------------
-``RELRAY_TEST_CRASH_FRAME=N``: rendering frame N raises ``RuntimeError`` half-way, every
-time. ``RELRAY_TEST_PAUSE_FRAME=N:FLAG``: the first process to reach the middle of frame
-N writes its process id to the file FLAG (only if FLAG does not exist yet) and sleeps
-up to :data:`PAUSE_SECONDS`, so a test can kill it mid-frame.
 """
 
 from __future__ import annotations
@@ -114,9 +107,6 @@ STILL_BATCHES = 16
 """Sample batches of a still (fewer when spp is smaller)."""
 TASK_RETRIES = 1
 """Extra tries of a task that raised before its frame counts as failed."""
-PAUSE_SECONDS = 60.0
-TEST_CRASH_ENV = "RELRAY_TEST_CRASH_FRAME"
-TEST_PAUSE_ENV = "RELRAY_TEST_PAUSE_FRAME"
 
 LOOPBACK_NO_DASHBOARD: dict[str, Any] = {"dashboard_address": "127.0.0.1:0",
                                          "scheduler_kwargs": {"dashboard": False}}
@@ -247,34 +237,6 @@ def worker_renderer(job: Job, run_id: str, threads: int) -> FrameRenderer:
         return renderer
 
 
-def _test_hook(frame: int, total: int) -> Callable[[int], None] | None:
-    """The progress callback of the test hooks (module docstring), or None."""
-    crash = os.environ.get(TEST_CRASH_ENV, "").strip()
-    pause = os.environ.get(TEST_PAUSE_ENV, "").strip()
-    crash_frame = int(crash) if crash else None
-    pause_frame, _, flag = pause.partition(":")
-    if crash_frame != frame and (not pause_frame or int(pause_frame) != frame):
-        return None
-    seen = [0]
-    fired = [False]
-
-    def hook(n: int) -> None:
-        seen[0] += n
-        if fired[0] or 2 * seen[0] < total:
-            return
-        fired[0] = True
-        if crash_frame == frame:
-            raise RuntimeError(f"{TEST_CRASH_ENV}: frame {frame} crashes (test hook)")
-        flag_path = Path(flag)
-        if flag and not flag_path.exists():
-            tmp = flag_path.with_name(flag_path.name + f".{os.getpid()}")
-            tmp.write_text(str(os.getpid()))
-            os.replace(tmp, flag_path)
-            time.sleep(PAUSE_SECONDS)
-
-    return hook
-
-
 def _frame_files(job: Job, frame: int) -> list[str]:
     paths = frame_paths(job.output.dir, job.output.name.format(frame=frame))
     return [str(paths[f]) for f in job.output.formats]
@@ -313,9 +275,7 @@ def render_frame_task(job: Job, run_id: str, frame: int, event: ShutterEvent, th
         return {"frame": frame, "paths": _frame_files(job, frame), "seconds": 0.0,
                 "d_range": None, "skipped": True}
     renderer = worker_renderer(job, run_id, task_threads(threads, slots))
-    s = job.render
-    film, stats = renderer.render(event, frame,
-                                  progress=_test_hook(frame, s.width * s.height * s.spp))
+    film, stats = renderer.render(event, frame)
     d_range = (stats.d_min, stats.d_max)
     paths = write_film(job, frame, event, film, renderer.to_rgb, stats.seconds, d_range,
                        digest)
@@ -329,9 +289,7 @@ def render_batch_task(job: Job, run_id: str, frame: int, event: ShutterEvent, th
                       ) -> tuple[Film, float, float, float]:
     """Worker: render the samples [s0, s1) of a frame; returns (film, seconds, D min, D max)."""
     renderer = worker_renderer(job, run_id, task_threads(threads, slots))
-    s = job.render
-    hook = _test_hook(frame, s.width * s.height * (samples[1] - samples[0]))
-    film, stats = renderer.render(event, frame, progress=hook, samples=samples)
+    film, stats = renderer.render(event, frame, samples=samples)
     return film, stats.seconds, stats.d_min, stats.d_max
 
 

@@ -18,6 +18,7 @@ import threading
 import time
 from pathlib import Path
 
+import farm_hooks
 import numpy as np
 import pytest
 
@@ -138,10 +139,22 @@ def reference(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def client():
+    """A LocalCluster whose workers load the fault injection of tests/farm_hooks.py."""
     from distributed import Client, LocalCluster
 
+    saved = {k: os.environ.get(k) for k in farm_hooks.PRELOAD_ENV}
+    os.environ.update(farm_hooks.PRELOAD_ENV)
+    import dask
+
+    dask.config.refresh()
     cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                            scheduler_port=0, silence_logs=40, **farm.LOOPBACK_NO_DASHBOARD)
+    for k, v in saved.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
+    dask.config.refresh()
     c = Client(cluster, set_as_default=False)
     try:
         yield c
@@ -418,7 +431,7 @@ def test_animation_on_cluster_is_bit_identical_and_resumes(tmp_path, client, ref
 def test_worker_killed_mid_frame_every_frame_arrives_identical(tmp_path, client, reference):
     job = load(write_job(tmp_path, 8))
     flag = tmp_path / "paused.pid"
-    set_worker_env(client, **{farm.TEST_PAUSE_ENV: f"3:{flag}"})
+    set_worker_env(client, **{farm_hooks.PAUSE_ENV: f"3:{flag}"})
     killed: list[int] = []
 
     def killer():
@@ -437,7 +450,7 @@ def test_worker_killed_mid_frame_every_frame_arrives_identical(tmp_path, client,
         result = farm.render_on_dask(job, client, threads=1)
     finally:
         t.join()
-        set_worker_env(client, **{farm.TEST_PAUSE_ENV: None})
+        set_worker_env(client, **{farm_hooks.PAUSE_ENV: None})
     assert killed, "no worker reached the middle of frame 3"
     assert sorted(result.rendered) == list(range(1, 9)) and not result.failed
     assert_same_frames(job.output.dir, reference[8], range(1, 9))
@@ -449,11 +462,11 @@ def test_a_frame_that_always_crashes_fails_alone(tmp_path, client, reference, ca
     path = write_job(tmp_path, 6)
     address = client.scheduler.address
     assert address.startswith("tcp://127.0.0.1:")
-    set_worker_env(client, **{farm.TEST_CRASH_ENV: "4"})
+    set_worker_env(client, **{farm_hooks.CRASH_ENV: "4"})
     try:
         code = cli.main(["render", str(path), "--scheduler", address, "--json-progress"])
     finally:
-        set_worker_env(client, **{farm.TEST_CRASH_ENV: None})
+        set_worker_env(client, **{farm_hooks.CRASH_ENV: None})
     out, err = capsys.readouterr()
     assert code == 1
     assert "relray: error: frame 4 failed: RuntimeError" in err and "frame 4 crashes" in err

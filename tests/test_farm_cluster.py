@@ -14,6 +14,7 @@ import textwrap
 import time
 from pathlib import Path
 
+import farm_hooks
 import psutil
 import pytest
 from test_farm import (
@@ -143,7 +144,7 @@ def test_client_killed_mid_animation_rerun_loses_nothing_renders_nothing_twice(
     render_job(reference, show_progress=False)
 
     flag = tmp_path / "paused.pid"
-    env = {**farm.subprocess_env(), farm.TEST_PAUSE_ENV: f"5:{flag}"}
+    env = {**farm.subprocess_env(), **farm_hooks.PRELOAD_ENV, farm_hooks.PAUSE_ENV: f"5:{flag}"}
     out = open(tmp_path / "client.out", "w")  # noqa: SIM115
     client = subprocess.Popen(farm.render_command(path, extra=["--workers", "2"]), env=env,
                               stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
