@@ -1,8 +1,8 @@
 """Frames and sample batches on Dask: resume, fault tolerance, JSON progress, user errors.
 
 The cluster here is a LocalCluster of 2 process workers bound to 127.0.0.1 (loopback
-only), shared by the tests of this module. The fault tests use the worker-side test hooks
-of ``core/farm.py`` (``RELRAY_TEST_PAUSE_FRAME``, ``RELRAY_TEST_CRASH_FRAME``).
+only), shared by the tests of this module. Its workers preload ``farm_hooks.py`` (fault
+injection: ``RELRAY_TEST_PAUSE_FRAME``, ``RELRAY_TEST_CRASH_FRAME``).
 """
 
 from __future__ import annotations
