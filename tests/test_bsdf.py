@@ -124,3 +124,151 @@ def test_lambert_white_furnace_is_exactly_one():
     """For a white Lambertian surface f cos / p = 1 for every cosine-weighted sample."""
     u1, u2 = _uniforms(10_000, 0)
     assert _lambert_furnace(u1, u2) == pytest.approx(1.0, rel=1e-6)
+
+
+# ------------------------------------------------------------------ chi-square per lobe
+# As Mitsuba 3 tests each BSDF: draw N directions with a lobe's sampler, bin them in
+# (cos θ, φ) about n = +z, and compare the counts with N × the lobe's pdf integrated over
+# each bin (a SUB×SUB midpoint rule inside every bin). Bins expecting fewer than 5 samples
+# are pooled; directions below the horizon (rejected by the integrator) form one more
+# bin expecting N (1 - ∫ pdf). The samples are a fixed deterministic set, so a test does
+# not flicker; a correct sampler passes at the significance SIGNIFICANCE, a sampler
+# checked against a wrong pdf fails (test_chi_square_detects_a_wrong_pdf).
+
+SIGNIFICANCE = 1e-3
+SUB = 24  # midpoint rule per bin side: resolves the peak of α = 0.15 at grazing wo
+N_COS, N_PHI, N_SAMPLES = 16, 32, 200_000
+
+
+@njit(cache=True)
+def _sample_lobe(kind, wo, alpha, u1, u2):
+    """Directions from one lobe: 0 Lambert, 1 GGX, 2 the mixture (w_d 0.4, w_m 0.6)."""
+    n = (0.0, 0.0, 1.0)
+    out = np.empty((len(u1), 3))
+    for i in range(len(u1)):
+        if kind == 0:
+            wi = bsdf.lambert_sample(n, u1[i], u2[i])
+        elif kind == 1:
+            wi = bsdf.ggx_sample(wo, n, alpha, u1[i], u2[i])
+        else:
+            # the integrator's lobe pick: u1 < 0.6 chooses the conductor, rescaled
+            if u1[i] < 0.6:
+                wi = bsdf.ggx_sample(wo, n, alpha, u1[i] / 0.6, u2[i])
+            else:
+                wi = bsdf.lambert_sample(n, (u1[i] - 0.6) / 0.4, u2[i])
+        out[i, 0], out[i, 1], out[i, 2] = wi
+    return out
+
+
+@njit(cache=True)
+def _lobe_pdf(kind, wo, alpha, wi):
+    n = (0.0, 0.0, 1.0)
+    a2 = alpha * alpha
+    if wi[2] <= 0.0:
+        return 0.0
+    if kind == 0:
+        return wi[2] * bsdf.INV_PI
+    if kind == 3:  # a wrong pdf: uniform on the hemisphere
+        return 1.0 / (2.0 * math.pi)
+    wd, wm = (0.0, 1.0) if kind == 1 else (0.4, 0.6)
+    return bsdf.principled_eval(wo, wi, n, wd, wm, a2, wd, wm)[3]
+
+
+@njit(cache=True)
+def _expected_counts(kind, wo, alpha, n_cos, n_phi, sub):
+    """∫ pdf dω over each (cos θ, φ) bin of the upper hemisphere (midpoint rule)."""
+    out = np.zeros((n_cos, n_phi))
+    dc, dp = 1.0 / n_cos, 2.0 * math.pi / n_phi
+    for a in range(n_cos):
+        for b in range(n_phi):
+            acc = 0.0
+            for i in range(sub):
+                c = (a + (i + 0.5) / sub) * dc
+                s = math.sqrt(max(0.0, 1.0 - c * c))
+                for j in range(sub):
+                    ph = (b + (j + 0.5) / sub) * dp
+                    acc += _lobe_pdf(kind, wo, alpha, (s * math.cos(ph), s * math.sin(ph), c))
+            out[a, b] = acc * dc * dp / (sub * sub)
+    return out
+
+
+def chi_square_p(kind_sample: int, kind_pdf: int, wo, alpha: float) -> float:
+    from scipy import stats
+
+    u1, u2 = _uniforms(N_SAMPLES, 11)
+    wi = _sample_lobe(kind_sample, wo, alpha, u1, u2)
+    above = wi[:, 2] > 0.0
+    cos_t = np.clip(wi[above, 2], 0.0, 1.0 - 1e-12)
+    phi = np.mod(np.arctan2(wi[above, 1], wi[above, 0]), 2 * math.pi)
+    observed, _, _ = np.histogram2d(cos_t, phi, bins=(N_COS, N_PHI),
+                                    range=((0, 1), (0, 2 * math.pi)))
+    expected = N_SAMPLES * _expected_counts(kind_pdf, wo, alpha, N_COS, N_PHI, SUB)
+    obs = np.append(observed.ravel(), (~above).sum())
+    exp = np.append(expected.ravel(), max(N_SAMPLES - expected.sum(), 0.0))
+    order = np.argsort(exp)  # pool the smallest bins until each pooled bin expects >= 5
+    pooled_o, pooled_e, acc_o, acc_e = [], [], 0.0, 0.0
+    for k in order:
+        acc_o += obs[k]
+        acc_e += exp[k]
+        if acc_e >= 5.0:
+            pooled_o.append(acc_o)
+            pooled_e.append(acc_e)
+            acc_o = acc_e = 0.0
+    if acc_e > 0.0 and pooled_e:
+        pooled_o[-1] += acc_o
+        pooled_e[-1] += acc_e
+    o, e = np.array(pooled_o), np.array(pooled_e)
+    chi2 = float(((o - e) ** 2 / e).sum())
+    return float(stats.chi2.sf(chi2, len(o) - 1))
+
+
+def test_chi_square_lambert():
+    assert chi_square_p(0, 0, (0.0, 0.6, 0.8), 0.0) > SIGNIFICANCE
+
+
+@pytest.mark.parametrize("alpha", [0.15, 0.4, 0.8])
+@pytest.mark.parametrize("theta_o", [0.2, 0.9, 1.4])
+def test_chi_square_ggx_conductor(alpha, theta_o):
+    wo = (math.sin(theta_o), 0.0, math.cos(theta_o))
+    assert chi_square_p(1, 1, wo, alpha) > SIGNIFICANCE
+
+
+@pytest.mark.parametrize("theta_o", [0.3, 1.1])
+def test_chi_square_lobe_mixture_matches_principled_eval(theta_o):
+    """The integrator's one-sample lobe choice has the density principled_eval returns."""
+    wo = (math.sin(theta_o), 0.0, math.cos(theta_o))
+    assert chi_square_p(2, 2, wo, 0.3) > SIGNIFICANCE
+
+
+def test_chi_square_detects_a_wrong_pdf():
+    """The test can fail: Lambert samples against a uniform-hemisphere pdf."""
+    assert chi_square_p(0, 3, (0.0, 0.0, 1.0), 0.0) < 1e-12
+
+
+@pytest.mark.parametrize("cos_o, eta", [(0.9, 1.5), (0.3, 1.5), (0.8, 1 / 1.5), (0.2, 1 / 1.5)])
+def test_dielectric_reflects_with_probability_fresnel_and_obeys_snell(cos_o, eta):
+    """Delta lobes: the reflected fraction is F (binomial, 5 standard errors); the
+    reflection is the mirror direction and the refraction obeys Snell's law."""
+    sin_o = math.sqrt(1 - cos_o * cos_o)
+    wo, n = (sin_o, 0.0, cos_o), (0.0, 0.0, 1.0)
+    f, _ = bsdf.fresnel_dielectric(cos_o, eta)
+    u, _ = _uniforms(20_000, 3)
+    results = [bsdf.dielectric_sample(wo, n, eta, x) for x in u]
+    refl = np.array([not t for _, t in results])
+    assert abs(refl.mean() - f) < 5 * math.sqrt(max(f * (1 - f), 1e-12) / len(u)) + 1e-12
+    for wi, transmitted in results[:50]:
+        if transmitted:
+            assert wi[2] < 0 and math.hypot(wi[0], wi[1]) == pytest.approx(sin_o / eta)
+            assert math.hypot(*wi) == pytest.approx(1.0)
+        else:
+            assert wi == pytest.approx((-sin_o, 0.0, cos_o))
+
+
+def test_mirror_and_shared_reflect():
+    wo, n = (0.6, 0.0, 0.8), (0.0, 0.0, 1.0)
+    wi, s = bsdf.mirror_sample(wo, n)
+    assert wi == pytest.approx((-0.6, 0.0, 0.8)) and s == bsdf.schlick_weight(0.8)
+    h = (0.0, 0.6, 0.8)
+    assert bsdf.reflect(wo, h, 0.64) == pytest.approx((-0.6, 0.768, 0.224))
+    wt = bsdf.refract(wo, n, 1.5, 0.8, math.sqrt(1 - 0.36 / 2.25))
+    assert wt[0] == pytest.approx(-0.4) and wt[2] < 0

@@ -15,6 +15,12 @@ a simplified Principled BSDF without the dielectric coat); ``roughness`` r → G
 ``ior`` → the smooth dielectric (wavelength-independent IOR, so no dispersion; the
 glass lobe ignores roughness).
 
+Each lobe's sampler returns the direction it draws; its density is the lobe's pdf
+(``lambert_sample``: cos θ_i/π; ``ggx_sample``: :func:`ggx_eval`'s pdf; the mirror and
+the dielectric are delta lobes). :func:`principled_eval` is the non-delta mixture the
+integrator evaluates (NEE, and the continuation's MIS pdf); :func:`reflect` and
+:func:`refract` are the one home of the mirror and Snell directions.
+
 Formulas (Trowbridge–Reitz/GGX, height-correlated Smith, Heitz 2018 VNDF sampling):
 
     D(h)   = α² / (π (cos²θ_h (α² - 1) + 1)²)
@@ -31,7 +37,7 @@ import math
 
 from numba import njit
 
-from .sampling import INV_PI, onb, sincos_2pi, to_world
+from .sampling import INV_PI, cosine_hemisphere, onb, sincos_2pi, to_world
 
 DELTA_ALPHA = 1e-3
 
@@ -146,3 +152,61 @@ def principled_eval(wo, wi, n, wd, wm, a2, sel_d, sel_m):
         s = schlick_weight(wi[0] * hx + wi[1] * hy + wi[2] * hz)
         pdf += sel_m * p
     return kd, km, s, pdf
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def reflect(wo, n, cos_o):
+    """The mirror direction of ``wo`` about unit ``n`` (``cos_o`` = wo·n): 2 cos_o n - wo."""
+    return (2.0 * cos_o * n[0] - wo[0], 2.0 * cos_o * n[1] - wo[1],
+            2.0 * cos_o * n[2] - wo[2])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def refract(wo, n, eta, cos_o, cos_t):
+    """Snell's transmitted direction for relative IOR ``eta`` (``cos_o`` = wo·n > 0,
+    ``cos_t`` from :func:`fresnel_dielectric`): -wo/η + (cos_o/η - cos_t) n."""
+    k = cos_o / eta - cos_t
+    return (-wo[0] / eta + k * n[0], -wo[1] / eta + k * n[1], -wo[2] / eta + k * n[2])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lambert_sample(n, u1, u2):
+    """A direction about ``n`` with the Lambert lobe's pdf cos θ_i / π."""
+    t, b = onb(n[0], n[1], n[2])
+    lx, ly, lz = cosine_hemisphere(u1, u2)
+    return to_world(lx, ly, lz, t, b, n[0], n[1], n[2])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def ggx_sample(wo, n, alpha, u1, u2):
+    """A direction from the GGX conductor lobe (visible normals, then :func:`reflect`):
+    its pdf is :func:`ggx_eval`'s. May lie below the surface (the caller rejects it)."""
+    h = ggx_sample_h(wo, n, alpha, u1, u2)
+    return reflect(wo, h, wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def mirror_sample(wo, n):
+    """The perfect conductor (α below ``DELTA_ALPHA``): (direction, Schlick weight s);
+    the lane factor is ρ + (1 - ρ) s (a delta lobe: no pdf)."""
+    cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+    return reflect(wo, n, cos_o), schlick_weight(cos_o)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def dielectric_sample(wo, n, eta, u):
+    """The smooth dielectric (relative IOR ``eta`` = n_t / n_i, ``n`` on the side of wo):
+    reflect with probability F, else refract. Returns (direction, transmitted); the
+    radiance factor of a transmission is 1/η² (a delta lobe: no pdf)."""
+    cos_o = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+    fr, cos_t = fresnel_dielectric(cos_o, eta)
+    if u < fr:
+        return reflect(wo, n, cos_o), False
+    return refract(wo, n, eta, cos_o, cos_t), True
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lane_value(kd, km, s, rho):
+    """The BSDF of one hero lane from :func:`principled_eval`'s factors and ρ(λ):
+    k_d ρ + k_m (ρ + (1 - ρ) s)."""
+    return kd * rho + km * (rho + (1.0 - rho) * s)

@@ -26,7 +26,7 @@ from numba import njit
 from ..physics import relativity
 from ..physics.relativity import aberrate_doppler_ray
 from ..scene.description import CameraSettings
-from .sampling import sobol2
+from .sampling import DIM_PIXEL, sobol2
 
 
 @dataclass(frozen=True)
@@ -69,9 +69,10 @@ class PinholeCamera:
                      origin_local: np.ndarray, radius: float):
         """The camera stage of a wavefront, fused in one kernel.
 
-        Jitters each path's pixel (RNG dimensions 0 and 1), builds d_cam, aberrates it into
-        the lab and computes D; the ray starts at the shutter event (``origin_local``, in
-        accelerator coordinates, float64) advanced to the scene's bounding sphere of
+        Jitters each path's pixel (the Sobol pair ``sampling.DIM_PIXEL``), builds d_cam,
+        aberrates it into the lab and computes D; the ray starts at the shutter event
+        (``origin_local``, in accelerator coordinates, float64) advanced to the scene's
+        bounding sphere of
         ``radius``.  Returns (o float32 (N,3), d_lab float32 (N,3), D float64 (N,),
         skipped distance float64 (N,)).
         """
@@ -112,7 +113,7 @@ def _primary_rays(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, h
     c = x0[0] * x0[0] + x0[1] * x0[1] + x0[2] * x0[2] - r2
     for i in range(len(keys)):
         p = pixels[i]
-        jx, jy = sobol2(keys[i], 0)
+        jx, jy = sobol2(keys[i], DIM_PIXEL)
         col = (p % width) + jx
         row = (p // width) + jy
         dx, dy, dz = view_direction(rot, tan_half, aspect, scale, sx, sy, width, height,

@@ -31,19 +31,36 @@ import numpy as np
 from numba import njit
 
 from ..physics import spectrum
+from ..scene.geometry import ray_offset
 from .accel import MISS_DISTANCE, Accel
-from .bsdf import DELTA_ALPHA, fresnel_dielectric, ggx_sample_h, principled_eval, schlick_weight
-from .lights import SKY, SPOT, SUN, TRIANGLE, LightTable, select, spot_mask
+from .bsdf import (
+    DELTA_ALPHA,
+    dielectric_sample,
+    ggx_sample,
+    lambert_sample,
+    lane_value,
+    mirror_sample,
+    principled_eval,
+)
+from .lights import (
+    LightTable,
+    light_record,
+    sample_light,
+    select,
+    sky_light_pdf,
+    triangle_light_pdf,
+)
 from .materials import SpectralTables
 from .sampling import (
-    cosine_hemisphere,
-    onb,
+    DIM_BSDF,
+    DIM_LIGHT,
+    DIM_LOBE,
+    DIM_ROULETTE,
+    ONE_MINUS,
+    bounce_dim,
     power_heuristic,
     rand,
     sobol2,
-    to_world,
-    uniform_sphere,
-    uniform_triangle,
 )
 
 # Russian roulette from the 4th segment on: measured on the Cornell box (128², 64 spp,
@@ -52,9 +69,6 @@ from .sampling import (
 RR_DEPTH = 4
 # fastmath without nnan/ninf: NaN and infinity checks keep their meaning
 FAST_MATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
-DIMS_CAMERA = 3      # jitter x, jitter y, wavelength offset
-DIMS_PER_BOUNCE = 8  # light pair, -, -, lobe pick, bsdf pair, -, roulette, spare
-ONE_MINUS = 1.0 - 2.0**-53
 
 
 class KernelScene(NamedTuple):
@@ -102,7 +116,7 @@ def kernel_scene(accel: Accel, triangles: np.ndarray, normals: np.ndarray | None
         tables.mat_weights, tables.mat_alpha, tables.mat_ior, tables.mat_emit_row,
         tables.mat_one_sided, lights.kind, lights.prim, lights.pos, lights.dir, lights.row,
         lights.scale, lights.spot, lights.cdf, lights.tri_pmf, float(lights.sky_pmf),
-        int(lights.sky_row), max(1e-5 * accel.extent, 1e-9))
+        int(lights.sky_row), ray_offset(accel.extent))
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
@@ -140,10 +154,68 @@ def lerp(table, row, i, f):
     return a + f * (table[row, i + 1] - a)
 
 
+# Device functions of the kernel. Those that read arrays are one straight run of code
+# (no branch, no loop): inlined, numba then keeps no reference count on the arrays; a
+# branchy one would cost atomic increments in the loop (measured: +45 % kernel time).
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def surface_point(v0, e1, e2, ng, tri, b1, b2):
+    """Point v0 + b1 e1 + b2 e2 of triangle ``tri`` and its unit geometric normal."""
+    return ((v0[tri, 0] + b1 * e1[tri, 0] + b2 * e2[tri, 0],
+             v0[tri, 1] + b1 * e1[tri, 1] + b2 * e2[tri, 1],
+             v0[tri, 2] + b1 * e1[tri, 2] + b2 * e2[tri, 2]),
+            (ng[tri, 0], ng[tri, 1], ng[tri, 2]))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def vertex_normal(vn, tri, b1, b2):
+    """The vertex normals of ``tri`` interpolated at (b1, b2) (not normalised)."""
+    b0 = 1.0 - b1 - b2
+    return (b0 * vn[tri, 0, 0] + b1 * vn[tri, 1, 0] + b2 * vn[tri, 2, 0],
+            b0 * vn[tri, 0, 1] + b1 * vn[tri, 1, 1] + b2 * vn[tri, 2, 1],
+            b0 * vn[tri, 0, 2] + b1 * vn[tri, 1, 2] + b2 * vn[tri, 2, 2])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def face_forward(g, dx, dy, dz):
+    """The geometric normal turned towards the ray's origin, whether the ray hit the
+    front face, and cos θ_g = -d·ng (of the unturned normal)."""
+    cos_g = -(g[0] * dx + g[1] * dy + g[2] * dz)
+    front = cos_g > 0.0
+    if not front:
+        return (-g[0], -g[1], -g[2]), front, cos_g
+    return g, front, cos_g
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def shading_normal(n, g, dx, dy, dz):
+    """Unit interpolated normal ``n`` on g's side; g itself where it would face away from
+    the ray (d·n ≥ -1e-6)."""
+    nx, ny, nz = n
+    inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz + 1e-30)
+    nx, ny, nz = nx * inv, ny * inv, nz * inv
+    if nx * g[0] + ny * g[1] + nz * g[2] < 0.0:
+        nx, ny, nz = -nx, -ny, -nz
+    if -(nx * dx + ny * dy + nz * dz) <= 1e-6:
+        return g
+    return nx, ny, nz
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def shadow_segment(origin, target, wi, finite):
+    """The shadow ray from ``origin``: towards ``target`` (a finite light: unit direction
+    and length, shortened by 1e-4 so as not to hit the light) or along ``wi`` (1e30)."""
+    if finite:
+        sx, sy, sz = target[0] - origin[0], target[1] - origin[1], target[2] - origin[2]
+        sl = math.sqrt(sx * sx + sy * sy + sz * sz)
+        return (sx / sl, sy / sl, sz / sl), sl * (1.0 - 1e-4)
+    return wi, 1e30
+
+
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
 def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, li, lf,
           prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d, sh_t, sh_c, sky_seen, e_row, e_val):
-    """One bounce for the live rays 0 ≤ i < n (ray i belongs to path ``idx[i]``).
+    """One bounce for the live rays 0 ≤ i < n (ray i belongs to path ``idx[i]``):
+    hit → emission → next-event estimation → continuation → roulette.
 
     Adds emission seen by the ray (MIS-weighted against NEE), prepares one shadow ray
     (NEE) and samples the continuation.  The continuing rays are compacted *in place*
@@ -152,10 +224,13 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
     (continuing rays, shadow rays).  ``sky_seen = False`` (a transparent film) hides the
     sky from camera rays (depth 0) only.
 
-    Spectral lookups use the paths' table columns ``li``/``lf`` (:func:`column_split`);
-    ``e_row``/``e_val`` cache per path the emission row that next-event estimation
-    looked up last (``e_row`` = -1: none yet), so a path that keeps sampling the same
-    light (or lights of one material) reads its spectrum once.
+    Light sampling and its pdfs are :mod:`.lights`' (:func:`sample_light`,
+    :func:`triangle_light_pdf`, :func:`sky_light_pdf`), every lobe's sampler and the
+    mixture's eval/pdf are :mod:`.bsdf`'s, the random numbers' dimensions
+    :mod:`.sampling`'s layout (:func:`bounce_dim`).  Spectral lookups use the paths'
+    table columns ``li``/``lf`` (:func:`column_split`); ``e_row``/``e_val`` cache per
+    path the emission row that next-event estimation looked up last (``e_row`` = -1:
+    none yet), so a path that keeps sampling the same light reads its spectrum once.
     """
     # the scene's arrays as locals: reading them from the tuple inside the loop costs an
     # atomic reference-count increment and decrement per access (measured: ~40 % of the
@@ -164,7 +239,10 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps) = sc
-    base = 3 + depth * 8
+    dim_light = bounce_dim(depth, DIM_LIGHT)
+    dim_lobe = bounce_dim(depth, DIM_LOBE)
+    dim_bsdf = bounce_dim(depth, DIM_BSDF)
+    dim_roulette = bounce_dim(depth, DIM_ROULETTE)
     n_alive = 0
     n_sh = 0
     lane_c = np.zeros(4, np.float32)
@@ -174,46 +252,28 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
         key = keys[pi]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         tri = prim[i]
+        # ---- a miss: the sky
         if tri < 0:
             if s_sky_row >= 0 and (depth > 0 or sky_seen):
                 w = 1.0
                 if depth > 0 and prev_delta[pi] == 0 and s_sky_pmf > 0.0:
-                    w = power_heuristic(prev_pdf[pi], s_sky_pmf / (4.0 * math.pi))
+                    w = power_heuristic(prev_pdf[pi], sky_light_pdf(s_sky_pmf))
                 for j in range(nlanes):
                     L[pi, j] += thr[pi, j] * w * lerp(s_emit, s_sky_row, li[pi, j], lf[pi, j])
             continue
+        # ---- the hit and its emission
         m = s_tri_mat[tri]
-        b1 = bu[i]
-        b2 = bv[i]
-        px = s_v0[tri, 0] + b1 * s_e1[tri, 0] + b2 * s_e2[tri, 0]
-        py = s_v0[tri, 1] + b1 * s_e1[tri, 1] + b2 * s_e2[tri, 1]
-        pz = s_v0[tri, 2] + b1 * s_e1[tri, 2] + b2 * s_e2[tri, 2]
-        gx, gy, gz = s_ng[tri, 0], s_ng[tri, 1], s_ng[tri, 2]
-        cos_g = -(gx * dx + gy * dy + gz * dz)
-        front = cos_g > 0.0
-        if not front:
-            gx, gy, gz = -gx, -gy, -gz
+        p, g = surface_point(s_v0, s_e1, s_e2, s_ng, tri, bu[i], bv[i])
+        g, front, cos_g = face_forward(g, dx, dy, dz)
+        nrm = g
         if s_has_vn:
-            b0 = 1.0 - b1 - b2
-            nx = b0 * s_vn[tri, 0, 0] + b1 * s_vn[tri, 1, 0] + b2 * s_vn[tri, 2, 0]
-            ny = b0 * s_vn[tri, 0, 1] + b1 * s_vn[tri, 1, 1] + b2 * s_vn[tri, 2, 1]
-            nz = b0 * s_vn[tri, 0, 2] + b1 * s_vn[tri, 1, 2] + b2 * s_vn[tri, 2, 2]
-            inv = 1.0 / math.sqrt(nx * nx + ny * ny + nz * nz + 1e-30)
-            nx, ny, nz = nx * inv, ny * inv, nz * inv
-            if nx * gx + ny * gy + nz * gz < 0.0:
-                nx, ny, nz = -nx, -ny, -nz
-            if -(nx * dx + ny * dy + nz * dz) <= 1e-6:
-                nx, ny, nz = gx, gy, gz
-        else:
-            nx, ny, nz = gx, gy, gz
-        # emission seen by this ray
+            nrm = shading_normal(vertex_normal(s_vn, tri, bu[i], bv[i]), g, dx, dy, dz)
         er = s_mat_emit_row[m]
         if er >= 0 and (front or s_mat_one_sided[m] == 0):
             w = 1.0
             if depth > 0 and prev_delta[pi] == 0:
-                tt = t_hit[i]
-                p_l = s_tri_pmf[tri] * tt * tt / (s_area[tri] * abs(cos_g))
-                w = power_heuristic(prev_pdf[pi], p_l)
+                w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
+                    s_tri_pmf[tri], s_area[tri], t_hit[i], cos_g))
             for j in range(nlanes):
                 L[pi, j] += thr[pi, j] * w * lerp(s_emit, er, li[pi, j], lf[pi, j])
         if depth + 1 >= max_depth:
@@ -227,172 +287,95 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
         a = s_mat_alpha[m]
         a2 = a * a
         metal_delta = wm > 0.0 and a < DELTA_ALPHA
-        smooth_w = wd + (0.0 if metal_delta else wm)
-        sel_d = wd
-        sel_m = wm
         wo = (-dx, -dy, -dz)
-        nrm = (nx, ny, nz)
-        eps = s_eps + 2e-7 * max(abs(px), max(abs(py), abs(pz)))
-        # next-event estimation
-        nl = len(s_l_kind)
-        if smooth_w > 0.0 and nl > 0:
-            # one stratified pair picks the light (u_a) and the point on it: u_a is
-            # reused, rescaled to [0, 1) inside the picked light's cdf interval
-            u_a, u2 = sobol2(key, base)
+        eps = s_eps + 2e-7 * max(abs(p[0]), max(abs(p[1]), abs(p[2])))
+        # ---- next-event estimation (the non-delta lobes only)
+        if wd + (0.0 if metal_delta else wm) > 0.0 and len(s_l_kind) > 0:
+            # one stratified pair picks the light (u_a, then reused, rescaled to [0, 1)
+            # inside the picked light's cdf interval) and the point on it
+            u_a, u2 = sobol2(key, dim_light)
             k, p_sel = select(s_l_cdf, u_a)
             u1 = min((u_a - s_l_cdf[k]) / p_sel, ONE_MINUS) if p_sel > 0.0 else 0.0
-            kind = s_l_kind[k]
-            delta = True
-            scale = s_l_scale[k]
-            ok = True
-            finite = False
-            tx = ty = tz = 0.0
-            if kind == TRIANGLE:
-                lt = s_l_prim[k]
-                s1, s2 = uniform_triangle(u1, u2)
-                qx = s_v0[lt, 0] + s1 * s_e1[lt, 0] + s2 * s_e2[lt, 0] - px
-                qy = s_v0[lt, 1] + s1 * s_e1[lt, 1] + s2 * s_e2[lt, 1] - py
-                qz = s_v0[lt, 2] + s1 * s_e1[lt, 2] + s2 * s_e2[lt, 2] - pz
-                dist = math.sqrt(qx * qx + qy * qy + qz * qz)
-                wix, wiy, wiz = qx / dist, qy / dist, qz / dist
-                cos_l = -(s_ng[lt, 0] * wix + s_ng[lt, 1] * wiy + s_ng[lt, 2] * wiz)
-                if s_mat_one_sided[s_tri_mat[lt]] == 1 and cos_l <= 0.0:
-                    ok = False
-                # the shadow ray aims at the light point lifted off the light towards x
-                lift = eps if cos_l > 0.0 else -eps
-                tx = px + qx + s_ng[lt, 0] * lift
-                ty = py + qy + s_ng[lt, 1] * lift
-                tz = pz + qz + s_ng[lt, 2] * lift
-                cos_l = abs(cos_l)
-                p_l = p_sel * dist * dist / (s_area[lt] * cos_l + 1e-30)
-                delta = False
-                finite = True
-            elif kind == SKY:
-                wix, wiy, wiz = uniform_sphere(u1, u2)
-                p_l = p_sel / (4.0 * math.pi)
-                delta = False
-                finite = False
-            elif kind == SUN:
-                wix, wiy, wiz = -s_l_dir[k, 0], -s_l_dir[k, 1], -s_l_dir[k, 2]
-                p_l = p_sel
-                finite = False
-            else:
-                qx, qy, qz = s_l_pos[k, 0] - px, s_l_pos[k, 1] - py, s_l_pos[k, 2] - pz
-                dist = math.sqrt(qx * qx + qy * qy + qz * qz) + 1e-30
-                wix, wiy, wiz = qx / dist, qy / dist, qz / dist
-                scale = scale / (dist * dist)
-                if kind == SPOT:
-                    cos_a = -(s_l_dir[k, 0] * wix + s_l_dir[k, 1] * wiy + s_l_dir[k, 2] * wiz)
-                    scale *= spot_mask(cos_a, s_l_spot[k, 0], s_l_spot[k, 1])
-                p_l = p_sel
-                tx, ty, tz = s_l_pos[k, 0], s_l_pos[k, 1], s_l_pos[k, 2]
-                finite = True
-            wi = (wix, wiy, wiz)
-            if ok and p_l > 0.0 and scale > 0.0 and (wix * gx + wiy * gy + wiz * gz) > 0.0:
-                kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, sel_d, sel_m)
-                cos_i = wix * nx + wiy * ny + wiz * nz
+            light = light_record(k, s_l_kind, s_l_prim, s_l_pos, s_l_dir, s_l_scale, s_l_spot,
+                                 s_v0, s_e1, s_e2, s_ng, s_area, s_tri_mat, s_mat_one_sided)
+            wi, p_l, scale, delta, finite, target, ok = sample_light(light, p_sel, u1, u2, p[0],
+                                                                     p[1], p[2], eps)
+            if ok and p_l > 0.0 and scale > 0.0 and (wi[0] * g[0] + wi[1] * g[1]
+                                                     + wi[2] * g[2]) > 0.0:
+                kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, wd, wm)
+                cos_i = wi[0] * nrm[0] + wi[1] * nrm[1] + wi[2] * nrm[2]
                 if pdf_b > 0.0 and cos_i > 0.0:
-                    w = 1.0 if delta else power_heuristic(p_l, pdf_b)
-                    c = w * cos_i * scale / p_l
+                    c = (1.0 if delta else power_heuristic(p_l, pdf_b)) * cos_i * scale / p_l
                     row = s_l_row[k]
                     if e_row[pi] != row:
                         e_row[pi] = row
                         for j in range(nlanes):
                             e_val[pi, j] = lerp(s_emit, row, li[pi, j], lf[pi, j])
                     for j in range(nlanes):
-                        rho = rho_j[j]
-                        f = kd * rho + km * (rho + (1.0 - rho) * s)
-                        lane_c[j] = thr[pi, j] * f * c * e_val[pi, j]
-                    ox, oy, oz = px + gx * eps, py + gy * eps, pz + gz * eps
-                    k_sh = n_sh
-                    sh_idx[k_sh] = pi
-                    sh_o[k_sh, 0], sh_o[k_sh, 1], sh_o[k_sh, 2] = ox, oy, oz
-                    if finite:
-                        # direction and length from the lifted origin to the target
-                        sx, sy, sz = tx - ox, ty - oy, tz - oz
-                        sl = math.sqrt(sx * sx + sy * sy + sz * sz)
-                        sh_d[k_sh, 0], sh_d[k_sh, 1], sh_d[k_sh, 2] = sx / sl, sy / sl, sz / sl
-                        sh_t[k_sh] = sl * (1.0 - 1e-4)
-                    else:
-                        sh_d[k_sh, 0], sh_d[k_sh, 1], sh_d[k_sh, 2] = wix, wiy, wiz
-                        sh_t[k_sh] = 1e30
+                        lane_c[j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
+                            * e_val[pi, j]
+                    ox, oy, oz = p[0] + g[0] * eps, p[1] + g[1] * eps, p[2] + g[2] * eps
+                    sd, st = shadow_segment((ox, oy, oz), target, wi, finite)
+                    sh_idx[n_sh] = pi
+                    sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = ox, oy, oz
+                    sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]
+                    sh_t[n_sh] = st
                     for j in range(nlanes):
-                        sh_c[k_sh, j] = lane_c[j]
+                        sh_c[n_sh, j] = lane_c[j]
                     n_sh += 1
-        # continue the path: pick a lobe
-        ul = rand(key, base + 3)
-        u1, u2 = sobol2(key, base + 4)
+        # ---- the continuation: lobe picks [0, w_g) glass, [w_g, w_g + w_m) metal, the
+        # rest diffuse; the non-delta density is w_d p_d + w_m p_m = pdf_b (one-sample
+        # MIS over the lobes)
+        ul = rand(key, dim_lobe)
+        u1, u2 = sobol2(key, dim_bsdf)
         off = 1.0
         if ul < wg:
             # smooth dielectric: entering when the ray meets the geometric front face
             eta = s_mat_ior[m] if front else 1.0 / s_mat_ior[m]
-            cos_o = wo[0] * nx + wo[1] * ny + wo[2] * nz
-            fr, cos_t = fresnel_dielectric(cos_o, eta)
-            if u1 < fr:
-                wix = 2.0 * cos_o * nx - wo[0]
-                wiy = 2.0 * cos_o * ny - wo[1]
-                wiz = 2.0 * cos_o * nz - wo[2]
-            else:
-                wix = -wo[0] / eta + (cos_o / eta - cos_t) * nx
-                wiy = -wo[1] / eta + (cos_o / eta - cos_t) * ny
-                wiz = -wo[2] / eta + (cos_o / eta - cos_t) * nz
+            wi, transmitted = dielectric_sample(wo, nrm, eta, u1)
+            if transmitted:
                 inv_e2 = 1.0 / (eta * eta)
                 for j in range(nlanes):
                     thr[pi, j] *= inv_e2
                 off = -1.0
             prev_delta[pi] = 1
         elif metal_delta and ul < wg + wm:
-            cos_o = wo[0] * nx + wo[1] * ny + wo[2] * nz
-            wix = 2.0 * cos_o * nx - wo[0]
-            wiy = 2.0 * cos_o * ny - wo[1]
-            wiz = 2.0 * cos_o * nz - wo[2]
-            s = schlick_weight(cos_o)
+            wi, s = mirror_sample(wo, nrm)
             for j in range(nlanes):
                 rho = rho_j[j]
                 thr[pi, j] *= rho + (1.0 - rho) * s
             prev_delta[pi] = 1
         else:
             if ul >= wg + wm:
-                t, b = onb(nx, ny, nz)
-                lx, ly, lz = cosine_hemisphere(u1, u2)
-                wix, wiy, wiz = to_world(lx, ly, lz, t, b, nx, ny, nz)
+                wi = lambert_sample(nrm, u1, u2)
             else:
-                hx, hy, hz = ggx_sample_h(wo, nrm, a, u1, u2)
-                c = wo[0] * hx + wo[1] * hy + wo[2] * hz
-                wix = 2.0 * c * hx - wo[0]
-                wiy = 2.0 * c * hy - wo[1]
-                wiz = 2.0 * c * hz - wo[2]
-            wi = (wix, wiy, wiz)
-            if wix * gx + wiy * gy + wiz * gz <= 0.0:
+                wi = ggx_sample(wo, nrm, a, u1, u2)
+            if wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] <= 0.0:
                 continue
-            kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, sel_d, sel_m)
+            kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, wd, wm)
             if pdf_b <= 0.0:
                 continue
-            cos_i = wix * nx + wiy * ny + wiz * nz
-            # lobe picks: [0, w_g) glass, [w_g, w_g + w_m) metal, the rest diffuse; so the
-            # density of wi is w_d p_d + w_m p_m = pdf_b (one-sample MIS over the lobes)
-            c = cos_i / pdf_b
+            c = (wi[0] * nrm[0] + wi[1] * nrm[1] + wi[2] * nrm[2]) / pdf_b
             for j in range(nlanes):
-                rho = rho_j[j]
-                thr[pi, j] *= (kd * rho + km * (rho + (1.0 - rho) * s)) * c
+                thr[pi, j] *= lane_value(kd, km, s, rho_j[j]) * c
             prev_pdf[pi] = pdf_b
             prev_delta[pi] = 0
-        # Russian roulette
+        # ---- Russian roulette
         if depth + 1 >= RR_DEPTH:
             q = 0.0
             for j in range(nlanes):
                 q = max(q, thr[pi, j])
             if q < 1.0:
-                if rand(key, base + 6) >= q:
+                if rand(key, dim_roulette) >= q:
                     continue
                 for j in range(nlanes):
                     thr[pi, j] /= q
         k_a = n_alive
         idx[k_a] = pi
-        o[k_a, 0] = px + gx * eps * off
-        o[k_a, 1] = py + gy * eps * off
-        o[k_a, 2] = pz + gz * eps * off
-        d[k_a, 0], d[k_a, 1], d[k_a, 2] = wix, wiy, wiz
+        o[k_a, 0] = p[0] + g[0] * eps * off
+        o[k_a, 1] = p[1] + g[1] * eps * off
+        o[k_a, 2] = p[2] + g[2] * eps * off
+        d[k_a, 0], d[k_a, 1], d[k_a, 2] = wi[0], wi[1], wi[2]
         n_alive += 1
     return n_alive, n_sh
 

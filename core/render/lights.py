@@ -14,6 +14,11 @@ estimate with a uniform share (:func:`selection_pmf`), then a point or direction
 
 Positions are in the accelerator's local coordinates (lab minus ``Accel.origin``).
 Spectral shapes are rows of :class:`materials.SpectralTables` ``emit``.
+
+:func:`sample_light` draws the direction to a light as the table says (from the
+light's :func:`light_record`);
+:func:`triangle_light_pdf` and :func:`sky_light_pdf` give the same densities for a
+direction that BSDF sampling found (for multiple importance sampling).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from numba import njit
 
 from ..physics import spectrum
 from .materials import SpectralTables, light_spectrum
+from .sampling import uniform_sphere, uniform_triangle
 
 TRIANGLE, POINT, SPOT, SUN, SKY = 0, 1, 2, 3, 4
 UNIFORM_SHARE = 0.5
@@ -143,3 +149,86 @@ def spot_mask(cos_a, cos_half, smooth):
         return 1.0
     t = min(1.0, (cos_a - cos_half) / smooth)
     return t * t * (3.0 - 2.0 * t)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def triangle_light_pdf(pmf, area, dist, cos_l):
+    """Solid-angle density of NEE towards a point of an emissive triangle seen at
+    distance ``dist`` under ``cos_l``: p_sel · dist² / (A |cos θ_y|)."""
+    return pmf * dist * dist / (area * abs(cos_l))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def sky_light_pdf(pmf):
+    """Solid-angle density of NEE towards the sky: p_sel / (4π)."""
+    return pmf / (4.0 * math.pi)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot, v0, e1, e2, ng, area,
+                 tri_mat, mat_one_sided):
+    """Everything :func:`sample_light` needs of light ``k``, read in one straight run
+    (no branch: numba then keeps no reference count on the arrays). The triangle fields
+    are those of the light's triangle (of some triangle for other kinds: unused)."""
+    lt = l_prim[k]
+    return (l_kind[k], (l_pos[k, 0], l_pos[k, 1], l_pos[k, 2]),
+            (l_dir[k, 0], l_dir[k, 1], l_dir[k, 2]), l_scale[k], (l_spot[k, 0], l_spot[k, 1]),
+            (v0[lt, 0], v0[lt, 1], v0[lt, 2]), (e1[lt, 0], e1[lt, 1], e1[lt, 2]),
+            (e2[lt, 0], e2[lt, 1], e2[lt, 2]), (ng[lt, 0], ng[lt, 1], ng[lt, 2]), area[lt],
+            mat_one_sided[tri_mat[lt]])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def sample_light(light, p_sel, u1, u2, px, py, pz, eps):
+    """Next-event estimation from the point x = (px, py, pz) (accelerator coordinates)
+    towards ``light`` (:func:`light_record`), picked with probability ``p_sel``, as the
+    module table says; (u1, u2) place the point on an area light or the sky direction.
+
+    Returns ``(wi, p_l, scale, delta, finite, target, ok)``: the unit direction to the
+    light, the solid-angle pdf (p_sel for delta lights), the radiometric factor (I/r²
+    with the spot mask, E, or 1), whether the light is a delta light, whether it lies at
+    a finite distance, the shadow ray's target (a triangle point is lifted by ``eps``
+    off the light towards x) and False when a one-sided light is seen from behind.
+    """
+    kind, pos, dirn, scale, spot, tv0, te1, te2, tng, tarea, one_sided = light
+    delta = True
+    ok = True
+    finite = False
+    tx = ty = tz = 0.0
+    if kind == TRIANGLE:
+        s1, s2 = uniform_triangle(u1, u2)
+        qx = tv0[0] + s1 * te1[0] + s2 * te2[0] - px
+        qy = tv0[1] + s1 * te1[1] + s2 * te2[1] - py
+        qz = tv0[2] + s1 * te1[2] + s2 * te2[2] - pz
+        dist = math.sqrt(qx * qx + qy * qy + qz * qz)
+        wix, wiy, wiz = qx / dist, qy / dist, qz / dist
+        cos_l = -(tng[0] * wix + tng[1] * wiy + tng[2] * wiz)
+        if one_sided == 1 and cos_l <= 0.0:
+            ok = False
+        lift = eps if cos_l > 0.0 else -eps
+        tx = px + qx + tng[0] * lift
+        ty = py + qy + tng[1] * lift
+        tz = pz + qz + tng[2] * lift
+        cos_l = abs(cos_l)
+        p_l = p_sel * dist * dist / (tarea * cos_l + 1e-30)
+        delta = False
+        finite = True
+    elif kind == SKY:
+        wix, wiy, wiz = uniform_sphere(u1, u2)
+        p_l = p_sel / (4.0 * math.pi)
+        delta = False
+    elif kind == SUN:
+        wix, wiy, wiz = -dirn[0], -dirn[1], -dirn[2]
+        p_l = p_sel
+    else:
+        qx, qy, qz = pos[0] - px, pos[1] - py, pos[2] - pz
+        dist = math.sqrt(qx * qx + qy * qy + qz * qz) + 1e-30
+        wix, wiy, wiz = qx / dist, qy / dist, qz / dist
+        scale = scale / (dist * dist)
+        if kind == SPOT:
+            cos_a = -(dirn[0] * wix + dirn[1] * wiy + dirn[2] * wiz)
+            scale *= spot_mask(cos_a, spot[0], spot[1])
+        p_l = p_sel
+        tx, ty, tz = pos[0], pos[1], pos[2]
+        finite = True
+    return (wix, wiy, wiz), p_l, scale, delta, finite, (tx, ty, tz), ok

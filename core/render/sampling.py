@@ -50,6 +50,35 @@ _MASK32 = np.uint64(0xFFFFFFFF)
 _INV24 = np.float32(1.0 / 16777216.0)
 _INV32 = 1.0 / 4294967296.0
 INV_PI = np.float32(1.0 / math.pi)
+ONE_MINUS = 1.0 - 2.0**-53
+"""The largest float64 below 1: keeps a rescaled uniform inside [0, 1)."""
+
+# The sample-dimension layout: the one place that says which dimension index each random
+# number of a path uses (:func:`sobol2` takes a pair's index, :func:`rand` a scalar's;
+# they share one index space, so no two consumers draw the same numbers).
+DIM_PIXEL = 0
+"""sobol2: the pixel jitter (x, y) of the camera ray."""
+DIM_WAVELENGTH = 2
+"""rand, of the pixel's own key: the hero-wavelength rotation (:func:`progressive_offsets`)."""
+DIMS_CAMERA = 3
+"""Dimensions before the first bounce's."""
+DIM_LIGHT = 0
+"""Per bounce, sobol2: the light pick (reused inside its cdf interval) and the point on it."""
+DIM_LOBE = 3
+"""Per bounce, rand: the lobe of the continuation."""
+DIM_BSDF = 4
+"""Per bounce, sobol2: the continuation direction."""
+DIM_ROULETTE = 6
+"""Per bounce, rand: Russian roulette."""
+DIMS_PER_BOUNCE = 8
+"""Dimensions per bounce (1, 2, 5 and 7 are spare)."""
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def bounce_dim(depth, offset):
+    """The dimension of ``offset`` (``DIM_LIGHT`` ...) at bounce ``depth`` (0: the camera
+    ray's hit)."""
+    return DIMS_CAMERA + depth * DIMS_PER_BOUNCE + offset
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -321,7 +350,7 @@ def progressive_offsets(seed, frame, pixels, samples):
     """
     out = np.empty(len(pixels), np.float64)
     for i in range(len(pixels)):
-        r = rand(path_key(seed, frame, pixels[i], np.uint64(0xFFFFFFFF)), 2)
+        r = rand(path_key(seed, frame, pixels[i], np.uint64(0xFFFFFFFF)), DIM_WAVELENGTH)
         v = radical_inverse2(samples[i]) + r
         out[i] = v - math.floor(v)
     return out

@@ -68,8 +68,8 @@ log = logging.getLogger("relray")
 #: A triangle is degenerate when |e1 × e2| <= DEGENERATE_TOL · (|e1|² + |e2|²).
 DEGENERATE_TOL = 1e-12
 
-#: The integrator's ray offset, max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN) in scene units
-#: (mirrors ``integrator.kernel_scene``; tests/test_stress_render.py pins the two together).
+#: The ray offset, max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN) in scene units: its one
+#: home (:func:`ray_offset`), which the integrator (``kernel_scene``) and the warning use.
 RAY_OFFSET_REL = 1e-5
 RAY_OFFSET_MIN = 1e-9
 
