@@ -7,7 +7,7 @@ Packages follow the data flow, and each imports only those before it (the layeri
     files                      reading input files: regular files only, bounded, no hang
     resources                  memory limit (physical, cgroup, rlimit), thread cap
     physics/    relativity, spectrum, sigmoid, cie_tables
-    scene/      description ◄── job (TOML), gltf, shapes;  geometry, motion
+    scene/      description ◄── job (TOML), gltf, shapes;  geometry, motion, footprint
     render/     camera, accel, sampling, bsdf, lights, materials, integrator, film, frames
     output/     imageio, frame_files (names, metadata, resume), contact
     progress    tqdm bar, JSON lines (the subprocess contract)

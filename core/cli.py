@@ -29,6 +29,7 @@ import numpy as np
 
 from . import farm, resources
 from .errors import UserError
+from .files import is_regular_file
 from .output.contact import write_contact_sheet
 from .output.frame_files import check_frame_names
 from .physics import relativity
@@ -264,7 +265,8 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_contact_sheet(args: argparse.Namespace) -> int:
-    frames = sorted(p for p in args.folder.glob("*.png") if not p.name.startswith("."))
+    frames = sorted(p for p in args.folder.glob("*.png")
+                    if not p.name.startswith(".") and is_regular_file(p))
     if not frames:
         raise UserError("no PNG frames found", key="folder", file=args.folder)
     path = write_contact_sheet(frames, args.out, columns=max(1, args.columns))

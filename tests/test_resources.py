@@ -95,3 +95,27 @@ def _ok_job(tmp_path: Path) -> job.Job:
     path.write_text("[[materials]]\nname = \"m\"\n[[objects]]\nshape = \"box\"\n"
                     "center = [0, 0, 0]\nsize = 1\nmaterial = \"m\"\n")
     return job.load_job(path)
+
+
+def test_loaded_meshes_count_against_the_limit(tmp_path: Path, monkeypatch) -> None:
+    """A mesh's triangles are unknown until its file is read: they are checked then,
+    before the accelerator is built, naming the file's key."""
+    from relray.core.scene.geometry import build_scene
+
+    obj = "".join(f"v {i} {i * i % 7} {i % 3}\n" for i in range(30))
+    obj += "".join(f"f {i + 1} {i + 2} {i + 3}\n" for i in range(28))
+    (tmp_path / "m.obj").write_text(obj)
+    path = tmp_path / "job.toml"
+    path.write_text('[render]\nwidth = 8\nheight = 8\n[[materials]]\nname = "m"\n'
+                    '[[objects]]\nshape = "mesh"\nfile = "m.obj"\nmaterial = "m"\n')
+    film = 1000  # a tiny film (as if the fixed cost were not there): the mesh dominates
+    monkeypatch.setattr(resources, "render_memory_bytes", lambda *a: film)
+    monkeypatch.setattr(resources, "memory_limit",
+                        lambda: MemoryLimit(film + resources.geometry_memory_bytes(10), "X"))
+    j = job.load_job(path)  # the film fits, the mesh is not counted yet
+    with pytest.raises(UserError, match="28 triangles.*more than X") as err:
+        build_scene(j)
+    assert err.value.key == "objects[0].file"
+    monkeypatch.setattr(resources, "memory_limit",
+                        lambda: MemoryLimit(film + resources.geometry_memory_bytes(28), "X"))
+    assert len(build_scene(j).triangles) > 0

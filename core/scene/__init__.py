@@ -3,8 +3,10 @@
 Owns the scene description (:mod:`.description`, the in-memory contract the TOML job,
 the glTF importer and the Blender exporter produce), the TOML job file and its
 validation (:mod:`.job`), glTF 2.0 import (:mod:`.gltf`), built-in shapes
-(:mod:`.shapes`), the flat triangle soup the renderer consumes (:mod:`.geometry`) and the
-camera's path through an animation (:mod:`.motion`).
+(:mod:`.shapes`), the flat triangle soup the renderer consumes (:mod:`.geometry`), the
+camera's path through an animation (:mod:`.motion`) and the job's peak memory
+(:mod:`.footprint`).
 
-May import: :mod:`relray.core.physics`, :mod:`relray.core.errors`.
+May import: :mod:`relray.core.physics`, :mod:`relray.core.errors`,
+:mod:`relray.core.files`, :mod:`relray.core.resources`.
 """

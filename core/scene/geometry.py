@@ -62,6 +62,7 @@ import numpy as np
 from ..errors import UserError
 from . import gltf, shapes
 from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
+from .footprint import check_memory
 
 log = logging.getLogger("relray")
 
@@ -247,6 +248,7 @@ def build_scene(job: Job) -> Scene:
     lights: list[LightSpec] = []
     camera = None
     named: list[tuple[str, int]] = []
+    lighten: dict[str, str] = {}
     if job.scene.file is not None:
         tris, norms, mids, mats, gl_lights, camera = gltf.load_gltf(
             job.scene.file, key="scene.file", job_file=job.path
@@ -261,6 +263,11 @@ def build_scene(job: Job) -> Scene:
         tris, norms = tessellate(obj, f"objects[{i}]", job.path)
         parts.append(_Part(tris, norms, ids[obj.material]))
         named.append((f"objects[{i}]", len(tris)))
+        if obj.shape == "mesh":
+            lighten[f"objects[{i}]"] = f"objects[{i}].file"
+    # before the accelerator: names what to lighten (a mesh's file, else the object)
+    check_memory(job.render, job.output, [(lighten.get(key, key), n) for key, n in named],
+                 job.path)
     triangles, normals, material_ids = _concatenate(parts)
     return scene_from_parts(triangles, normals, material_ids, materials,
                             [*lights, *job.scene.lights], job.scene.background, camera,

@@ -129,6 +129,7 @@ from .description import (
     SceneSpec,
     frozen,
 )
+from .footprint import check_memory
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".glb", ".gltf")
 GLTF_SUFFIXES = (".glb", ".gltf")
@@ -1083,35 +1084,11 @@ def _parse_job(data: Mapping[str, Any], path: Path, stack: tuple[Path, ...]) -> 
 
 def _check_memory(render: RenderSettings, output: OutputSettings, scene: SceneSpec,
                   ctx: _Ctx) -> None:
-    """A job whose film and geometry cannot fit in the memory this process may use (the
-    smallest of physical memory, cgroup limit and rlimits: :func:`.resources.memory_limit`)
-    is a user error before any work; the key is what to change."""
-    limit = resources.memory_limit()
-    if limit is None:
-        return
-    bands = 0
-    if "spectral-exr" in output.formats:
-        start, stop, step = output.spectral_bands
-        bands = int(round((stop - start) / step)) + 1
-    film = resources.render_memory_bytes(render.width, render.height, len(output.aovs), bands)
-    counts = [shapes.triangle_count(o.shape, o.params) for o in scene.objects]
-    geometry = resources.geometry_memory_bytes(sum(counts))
-    if film + geometry <= limit.bytes:
-        return
-    gib = 2.0**30
-    parts = (f"{render.width} x {render.height} pixels ({len(output.aovs)} AOVs, {bands} "
-             f"spectral bands): {film / gib:.1f} GiB; {sum(counts)} triangles: "
-             f"{geometry / gib:.1f} GiB")
-    if geometry > film:
-        i = max(range(len(counts)), key=counts.__getitem__)
-        key = f"objects[{i}].subdivisions" if scene.objects[i].shape == "sphere" \
-            else f"objects[{i}]"
-        advice = "use fewer subdivisions or objects"
-    else:
-        key, advice = "render.height", "render a smaller image (or fewer bands)"
-    raise UserError(f"needs about {(film + geometry) / gib:.1f} GiB of memory ({parts}), "
-                    f"more than {limit.source} allows ({limit.bytes / gib:.1f} GiB); {advice}",
-                    key=key, file=ctx.file)
+    """The film and the triangles known from the job (:mod:`.footprint`), before any
+    work; meshes and glTF files are counted again once loaded."""
+    parts = [(f"objects[{i}].subdivisions" if o.shape == "sphere" else f"objects[{i}]",
+              shapes.triangle_count(o.shape, o.params)) for i, o in enumerate(scene.objects)]
+    check_memory(render, output, parts, ctx.file)
 
 
 def _gltf_has_camera(file: Path, job_path: Path) -> bool:
