@@ -307,3 +307,56 @@ def test_fuzzed_templates_stay_inside_the_folder(tmp_path_factory, template, fir
 def test_fuzzed_templates_stay_inside_the_folder_long(tmp_path_factory, template, first,
                                                       n) -> None:
     _outside_folder_or_refused(tmp_path_factory.mktemp("fz"), template, first, n)
+
+
+def test_the_digest_is_the_same_in_every_process(tmp_path: Path) -> None:
+    """Resume compares digests computed by different runs (and farm workers): the same
+    job must give the same digest whatever the process's hash seed."""
+    import subprocess
+    import sys
+
+    path = setup(tmp_path)
+    code = ("import sys; from relray.core.scene import job; from relray.core.output import "
+            "digest; print(digest.job_digest(job.load_job(sys.argv[1])))")
+    outs = {subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True,
+                           text=True, check=True,
+                           env={**os.environ, "PYTHONHASHSEED": seed}
+                           ).stdout.strip() for seed in ("1", "2")}
+    assert outs == {digest.job_digest(jobmod.load_job(path))}
+
+
+NUMERIC_KEYS = [("width = 8", "width = {}", 8), ("radius = 0.6", "radius = {}", 0.6),
+                ("ct_per_frame = 0.5", "ct_per_frame = {}", 0.5),
+                ("emission_strength = 2.0", "emission_strength = {}", 2.0)]
+
+
+def _one_change_changes_the_digest(tmp_path: Path, which: int, bump: int) -> None:
+    old, template, value = NUMERIC_KEYS[which]
+    path = setup(tmp_path)
+    before = digest.job_digest(jobmod.load_job(path))
+    if isinstance(value, int):
+        new = template.format(value + bump)
+    else:
+        x = value
+        for _ in range(bump):
+            x = float(np.nextafter(x, np.inf))  # the smallest changes a float can make
+        new = template.format(repr(x))
+    for f in (path, tmp_path / "inc.toml"):
+        f.write_text(f.read_text().replace(old, new, 1))
+    assert digest.job_digest(jobmod.load_job(path)) != before
+
+
+@settings(max_examples=12, deadline=None)
+@given(which=st.integers(0, len(NUMERIC_KEYS) - 1), bump=st.integers(1, 3))
+def test_the_smallest_change_of_a_value_changes_the_digest(tmp_path_factory, which,
+                                                           bump) -> None:
+    _one_change_changes_the_digest(tmp_path_factory.mktemp("d"), which, bump)
+
+
+@pytest.mark.stress
+@pytest.mark.skipif(not STRESS, reason="make stress: RELRAY_STRESS=1")
+@settings(max_examples=300, deadline=None)
+@given(which=st.integers(0, len(NUMERIC_KEYS) - 1), bump=st.integers(1, 1000))
+def test_the_smallest_change_of_a_value_changes_the_digest_long(tmp_path_factory, which,
+                                                                bump) -> None:
+    _one_change_changes_the_digest(tmp_path_factory.mktemp("d"), which, bump)
