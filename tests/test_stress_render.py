@@ -449,8 +449,9 @@ def test_camera_1e6_from_a_small_scene(tmp_path, size):
 # ================================================================ limits: warn, stay finite
 
 
-def test_ray_offset_of_scene_mirrors_the_integrator(tmp_path):
-    """scene.ray_offset (used for the resolution warning) equals the integrator's eps."""
+def test_the_integrator_offsets_rays_by_the_scenes_ray_offset(tmp_path):
+    """The kernels' offset is geometry.ray_offset of the accelerator's extent (the offset's
+    one home, which the resolution warning also uses), at every scale."""
     for data in (cornell(), cornell(scale=1e-6), cornell(scale=1e5)):
         job = make_job(data, tmp_path)
         sc = scene_mod.build_scene(job)

@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from ..physics import spectrum
-from ..scene.geometry import ray_offset
+from ..scene.geometry import ray_offset, ray_offset_at
 from .accel import MISS_DISTANCE, Accel
 from .bsdf import (
     DELTA_ALPHA,
@@ -288,7 +288,7 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
         a2 = a * a
         metal_delta = wm > 0.0 and a < DELTA_ALPHA
         wo = (-dx, -dy, -dz)
-        eps = s_eps + 2e-7 * max(abs(p[0]), max(abs(p[1]), abs(p[2])))
+        eps = ray_offset_at(s_eps, p[0], p[1], p[2])
         # ---- next-event estimation (the non-delta lobes only)
         if wd + (0.0 if metal_delta else wm) > 0.0 and len(s_l_kind) > 0:
             # one stratified pair picks the light (u_a, then reused, rescaled to [0, 1)

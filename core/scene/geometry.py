@@ -38,9 +38,17 @@ Triangles with zero area or non-finite vertices are dropped, counted in
 "Zero area" is judged on the float32 vertices relative to the bounding-box centre,
 exactly as the accelerator will store them.
 
-**Resolution warning.** The integrator offsets continuation and shadow rays by
-``max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN)`` (extent: the largest side of the
-bounding box; see ``integrator.kernel_scene``). Details smaller than that offset are
+**Ray offset.** Continuation and shadow rays leave a surface point p (accelerator
+coordinates: lab minus the bounding-box centre) offset along the geometric normal by
+
+    ε(p) = max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN) + RAY_OFFSET_POINT · max_i |p_i|
+
+(extent: the largest side of the bounding box). The first term, :func:`ray_offset`, makes
+the image scale invariant; the second, :func:`ray_offset_at`, covers the float32
+rounding of p itself (2⁻²³ ≈ 1.2e-7 of its largest coordinate). This module is their
+one home: the integrator and the resolution warning use these functions.
+
+**Resolution warning.** Details smaller than the scene's offset are
 skipped or self-shadowed. When any triangle's longest edge is below the offset,
 :func:`build_scene` logs one warning with their number (``Scene.unresolved``); the render
 stays finite.
@@ -58,6 +66,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from ..errors import UserError
 from . import gltf, shapes
@@ -69,10 +78,10 @@ log = logging.getLogger("relray")
 #: A triangle is degenerate when |e1 × e2| <= DEGENERATE_TOL · (|e1|² + |e2|²).
 DEGENERATE_TOL = 1e-12
 
-#: The ray offset, max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN) in scene units: its one
-#: home (:func:`ray_offset`), which the integrator (``kernel_scene``) and the warning use.
+#: The ray offset ε(p) (module docstring): :func:`ray_offset` and :func:`ray_offset_at`.
 RAY_OFFSET_REL = 1e-5
 RAY_OFFSET_MIN = 1e-9
+RAY_OFFSET_POINT = 2e-7
 
 
 @dataclass
@@ -325,10 +334,10 @@ def scene_from_parts(
     unresolved = _count_unresolved(triangles)
     if unresolved:
         lo, hi = triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0)
-        log.warning("%d triangles are smaller than the ray offset %.3g (1e-5 of the scene's "
+        log.warning("%d triangles are smaller than the ray offset %.3g (%g of the scene's "
                     "extent %.3g): float32 rays cannot resolve them; they may render "
                     "wrongly (see README, Numerical limits)", unresolved,
-                    ray_offset(float(np.max(hi - lo))), float(np.max(hi - lo)))
+                    ray_offset(float(np.max(hi - lo))), RAY_OFFSET_REL, float(np.max(hi - lo)))
     return Scene(
         triangles=np.ascontiguousarray(triangles, dtype=np.float64),
         normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
@@ -343,8 +352,16 @@ def scene_from_parts(
 
 
 def ray_offset(extent: float) -> float:
-    """The integrator's ray offset for a scene whose bounding box's largest side is ``extent``."""
+    """The scene's part of the ray offset, max(RAY_OFFSET_REL · extent, RAY_OFFSET_MIN), for
+    a scene whose bounding box's largest side is ``extent`` (scene units)."""
     return max(RAY_OFFSET_REL * extent, RAY_OFFSET_MIN)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def ray_offset_at(base, px, py, pz):
+    """The ray offset ε(p) at the point (px, py, pz) (accelerator coordinates), given the
+    scene's part ``base`` (:func:`ray_offset`): base + RAY_OFFSET_POINT · max_i |p_i|."""
+    return base + RAY_OFFSET_POINT * max(abs(px), max(abs(py), abs(pz)))
 
 
 def _count_unresolved(triangles: np.ndarray) -> int:
