@@ -15,11 +15,19 @@ a simplified Principled BSDF without the dielectric coat); ``roughness`` r → G
 ``ior`` → the smooth dielectric (wavelength-independent IOR, so no dispersion; the
 glass lobe ignores roughness).
 
-Each lobe's sampler returns the direction it draws; its density is the lobe's pdf
-(``lambert_sample``: cos θ_i/π; ``ggx_sample``: :func:`ggx_eval`'s pdf; the mirror and
-the dielectric are delta lobes). :func:`principled_eval` is the non-delta mixture the
-integrator evaluates (NEE, and the continuation's MIS pdf); :func:`reflect` and
-:func:`refract` are the one home of the mirror and Snell directions.
+Every lobe, as Mitsuba 3's ``BSDF`` (all directions in the surface's rest frame):
+
+| lobe | eval (f without ρ, F) and pdf (solid angle) | sample |
+|---|---|---|
+| Lambert | :func:`lambert_eval`: 1/π, cos θ_i/π | :func:`lambert_sample` |
+| GGX conductor | :func:`ggx_eval`: D G2/(4 cos θ_o cos θ_i), G1(ωo) D/(4 cos θ_o) | :func:`ggx_sample` |
+| mirror | delta lobe: 0, 0 for any pair of directions | :func:`mirror_sample` |
+| dielectric | delta lobe: 0, 0 for any pair of directions | :func:`dielectric_sample` |
+
+:func:`principled_eval` is the non-delta mixture of a material (NEE, and the
+continuation's MIS pdf), :func:`principled_sample` the material's one-sample choice of
+a lobe and its direction (the continuation); :func:`reflect` and :func:`refract` are
+the one home of the mirror and Snell directions.
 
 Formulas (Trowbridge–Reitz/GGX, height-correlated Smith, Heitz 2018 VNDF sampling):
 
@@ -128,6 +136,13 @@ def fresnel_dielectric(cos_i, eta):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lambert_eval(cos_i):
+    """The Lambert lobe without ρ, and its pdf: (1/π, cos θ_i/π) for cos θ_i = wi·n > 0
+    (the caller checks the hemisphere)."""
+    return INV_PI, cos_i * INV_PI
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def principled_eval(wo, wi, n, wd, wm, a2, sel_d, sel_m):
     """Non-delta part of the material: (k_d, k_m, s, pdf) for the lane formula above.
 
@@ -138,8 +153,9 @@ def principled_eval(wo, wi, n, wd, wm, a2, sel_d, sel_m):
     cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
     if cos_i <= 0.0 or cos_o <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
-    kd = wd * INV_PI
-    pdf = sel_d * cos_i * INV_PI
+    f_l, p_l = lambert_eval(cos_i)
+    kd = wd * f_l
+    pdf = sel_d * p_l
     km = 0.0
     s = 0.0
     if wm > 0.0 and a2 > DELTA_ALPHA * DELTA_ALPHA:
@@ -210,3 +226,48 @@ def lane_value(kd, km, s, rho):
     """The BSDF of one hero lane from :func:`principled_eval`'s factors and ρ(λ):
     k_d ρ + k_m (ρ + (1 - ρ) s)."""
     return kd * rho + km * (rho + (1.0 - rho) * s)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def principled_sample(wo, n, g, front, wd, wm, wg, alpha, ior, ul, u1, u2):
+    """The continuation from a material: ``ul`` picks a lobe by its weight ([0, w_g)
+    glass, [w_g, w_g + w_m) metal, the rest diffuse), (u1, u2) its direction.
+
+    ``n`` is the shading normal towards ``wo``, ``g`` the geometric one (a direction below
+    g is refused), ``front`` whether the ray met g's front face (glass is entered from
+    the front, relative IOR η = ior, else 1/ior), ``alpha`` the GGX α (below
+    ``DELTA_ALPHA`` the metal is a mirror). The non-delta lobes are one-sample MIS: their
+    density is the mixture's, w_d p_d + w_m p_m (:func:`principled_eval`).
+
+    Returns ``(wi, weight, pdf, delta, transmitted, ok)``; ``weight`` = (k_0, k_d, k_m, s,
+    c) gives each hero lane's throughput factor f cos θ_i / pdf = (k_0 + k_d ρ + k_m (ρ +
+    (1 - ρ) s)) c (:func:`lane_weight`): 1 or 1/η² through glass, ρ + (1 - ρ) s off the
+    mirror; ``pdf`` is 0 for the delta lobes; ``ok`` is False for a refused direction.
+    """
+    if ul < wg:
+        eta = ior if front else 1.0 / ior
+        wi, transmitted = dielectric_sample(wo, n, eta, u1)
+        c = 1.0 / (eta * eta) if transmitted else 1.0
+        return wi, (1.0, 0.0, 0.0, 0.0, c), 0.0, True, transmitted, True
+    if wm > 0.0 and alpha < DELTA_ALPHA and ul < wg + wm:
+        wi, s = mirror_sample(wo, n)
+        return wi, (0.0, 0.0, 1.0, s, 1.0), 0.0, True, False, True
+    if ul >= wg + wm:
+        wi = lambert_sample(n, u1, u2)
+    else:
+        wi = ggx_sample(wo, n, alpha, u1, u2)
+    if wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] <= 0.0:
+        return wi, (0.0, 0.0, 0.0, 0.0, 0.0), 0.0, False, False, False
+    kd, km, s, pdf = principled_eval(wo, wi, n, wd, wm, alpha * alpha, wd, wm)
+    if pdf <= 0.0:
+        return wi, (0.0, 0.0, 0.0, 0.0, 0.0), 0.0, False, False, False
+    c = (wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]) / pdf
+    return wi, (0.0, kd, km, s, c), pdf, False, False, True
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lane_weight(weight, rho):
+    """The throughput factor of one hero lane from :func:`principled_sample`'s
+    ``weight`` and ρ(λ): (k_0 + k_d ρ + k_m (ρ + (1 - ρ) s)) c."""
+    k0, kd, km, s, c = weight
+    return (k0 + lane_value(kd, km, s, rho)) * c

@@ -33,15 +33,7 @@ from numba import njit
 from ..physics import spectrum
 from ..scene.geometry import ray_offset, ray_offset_at
 from .accel import MISS_DISTANCE, Accel
-from .bsdf import (
-    DELTA_ALPHA,
-    dielectric_sample,
-    ggx_sample,
-    lambert_sample,
-    lane_value,
-    mirror_sample,
-    principled_eval,
-)
+from .bsdf import DELTA_ALPHA, lane_value, lane_weight, principled_eval, principled_sample
 from .lights import (
     LightTable,
     light_record,
@@ -323,43 +315,17 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
                     for j in range(nlanes):
                         sh_c[n_sh, j] = lane_c[j]
                     n_sh += 1
-        # ---- the continuation: lobe picks [0, w_g) glass, [w_g, w_g + w_m) metal, the
-        # rest diffuse; the non-delta density is w_d p_d + w_m p_m = pdf_b (one-sample
-        # MIS over the lobes)
-        ul = rand(key, dim_lobe)
+        # ---- the continuation
         u1, u2 = sobol2(key, dim_bsdf)
-        off = 1.0
-        if ul < wg:
-            # smooth dielectric: entering when the ray meets the geometric front face
-            eta = s_mat_ior[m] if front else 1.0 / s_mat_ior[m]
-            wi, transmitted = dielectric_sample(wo, nrm, eta, u1)
-            if transmitted:
-                inv_e2 = 1.0 / (eta * eta)
-                for j in range(nlanes):
-                    thr[pi, j] *= inv_e2
-                off = -1.0
-            prev_delta[pi] = 1
-        elif metal_delta and ul < wg + wm:
-            wi, s = mirror_sample(wo, nrm)
-            for j in range(nlanes):
-                rho = rho_j[j]
-                thr[pi, j] *= rho + (1.0 - rho) * s
-            prev_delta[pi] = 1
-        else:
-            if ul >= wg + wm:
-                wi = lambert_sample(nrm, u1, u2)
-            else:
-                wi = ggx_sample(wo, nrm, a, u1, u2)
-            if wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] <= 0.0:
-                continue
-            kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, wd, wm)
-            if pdf_b <= 0.0:
-                continue
-            c = (wi[0] * nrm[0] + wi[1] * nrm[1] + wi[2] * nrm[2]) / pdf_b
-            for j in range(nlanes):
-                thr[pi, j] *= lane_value(kd, km, s, rho_j[j]) * c
-            prev_pdf[pi] = pdf_b
-            prev_delta[pi] = 0
+        wi, weight, pdf, delta, transmitted, ok = principled_sample(
+            wo, nrm, g, front, wd, wm, wg, a, s_mat_ior[m], rand(key, dim_lobe), u1, u2)
+        if not ok:
+            continue
+        for j in range(nlanes):
+            thr[pi, j] *= lane_weight(weight, rho_j[j])
+        prev_pdf[pi] = pdf
+        prev_delta[pi] = 1 if delta else 0
+        off = -1.0 if transmitted else 1.0
         # ---- Russian roulette
         if depth + 1 >= RR_DEPTH:
             q = 0.0
