@@ -17,12 +17,12 @@ glass lobe ignores roughness).
 
 Every lobe, as Mitsuba 3's ``BSDF`` (all directions in the surface's rest frame):
 
-| lobe | eval (f without ρ, F) and pdf (solid angle) | sample |
+| lobe | sample | eval (f without ρ and F) and pdf (solid angle) |
 |---|---|---|
-| Lambert | :func:`lambert_eval`: 1/π, cos θ_i/π | :func:`lambert_sample` |
-| GGX conductor | :func:`ggx_eval`: D G2/(4 cos θ_o cos θ_i), G1(ωo) D/(4 cos θ_o) | :func:`ggx_sample` |
-| mirror | delta lobe: 0, 0 for any pair of directions | :func:`mirror_sample` |
-| dielectric | delta lobe: 0, 0 for any pair of directions | :func:`dielectric_sample` |
+| Lambert | :func:`lambert_sample` | :func:`lambert_eval`: 1/π, cos θ_i/π |
+| GGX conductor | :func:`ggx_sample` | :func:`ggx_eval`: the formulas below |
+| mirror | :func:`mirror_sample` | delta lobe: 0, 0 for any pair of directions |
+| dielectric | :func:`dielectric_sample` | delta lobe: 0, 0 for any pair of directions |
 
 :func:`principled_eval` is the non-delta mixture of a material (NEE, and the
 continuation's MIS pdf), :func:`principled_sample` the material's one-sample choice of
@@ -35,6 +35,7 @@ Formulas (Trowbridge–Reitz/GGX, height-correlated Smith, Heitz 2018 VNDF sampl
     Λ(ω)   = (sqrt(1 + α² tan²θ) - 1) / 2,   G1 = 1/(1+Λ(ωo)),  G2 = 1/(1+Λ(ωo)+Λ(ωi))
     f_m    = F D G2 / (4 cosθo cosθi),        p(ωi) = G1(ωo) D(h) / (4 cosθo)
     Lambert: f = ρ/π,  p = cosθi/π
+    Mirror: ωi = 2 (ωo·n) n - ωo, throughput ρ + (1 - ρ)(1 - cosθo)⁵ (Schlick)
     Dielectric: exact Fresnel F(cosθ, η); reflect with probability F, else refract and
     scale radiance by 1/η² (pbrt-v4's TransportMode::Radiance).
 """
