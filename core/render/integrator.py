@@ -48,10 +48,10 @@ from .sampling import (
     DIM_LIGHT,
     DIM_LOBE,
     DIM_ROULETTE,
-    ONE_MINUS,
     bounce_dim,
     power_heuristic,
     rand,
+    rescale_uniform,
     sobol2,
 )
 
@@ -193,14 +193,43 @@ def shading_normal(n, g, dx, dy, dz):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def shadow_segment(origin, target, wi, finite):
-    """The shadow ray from ``origin``: towards ``target`` (a finite light: unit direction
-    and length, shortened by 1e-4 so as not to hit the light) or along ``wi`` (1e30)."""
+def offset_point(p, g, eps, side):
+    """p moved by ``eps`` along the unit geometric normal ``g``, to its side ``side`` = ±1
+    (ε from :func:`scene.geometry.ray_offset_at`)."""
+    return (p[0] + g[0] * eps * side, p[1] + g[1] * eps * side, p[2] + g[2] * eps * side)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def shadow_ray(p, g, eps, target, wi, finite):
+    """The shadow ray of NEE from the hit p (normal g, offset ε): (origin, unit direction,
+    length) towards ``target`` for a finite light (shortened by 1e-4 of its length so as
+    not to hit the light), else along ``wi`` with length 1e30."""
+    o = offset_point(p, g, eps, 1.0)
     if finite:
-        sx, sy, sz = target[0] - origin[0], target[1] - origin[1], target[2] - origin[2]
+        sx, sy, sz = target[0] - o[0], target[1] - o[1], target[2] - o[2]
         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
-        return (sx / sl, sy / sl, sz / sl), sl * (1.0 - 1e-4)
-    return wi, 1e30
+        return o, (sx / sl, sy / sl, sz / sl), sl * (1.0 - 1e-4)
+    return o, wi, 1e30
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def nee_factors(wo, wi, n, g, p_l, scale, delta, ok, wd, wm, a2):
+    """The BSDF and MIS factors of a light sample (:func:`lights.sample_light`'s ``wi``,
+    ``p_l``, ``scale``, ``delta``, ``ok``) at a hit with shading normal ``n`` and geometric
+    normal ``g``: ``(accepted, k_d, k_m, s, c)``; each hero lane then receives
+
+        thr · lane_value(k_d, k_m, s, ρ) · c · L_e(λ),   c = w cos θ_i · scale / p_l,
+
+    w = 1 for a delta light, else the power heuristic of p_l against the material's pdf
+    (:func:`bsdf.principled_eval`). Refused: no light, wi below g or n, a zero BSDF pdf.
+    """
+    if ok and p_l > 0.0 and scale > 0.0 and wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] > 0.0:
+        kd, km, s, pdf_b = principled_eval(wo, wi, n, wd, wm, a2, wd, wm)
+        cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+        if pdf_b > 0.0 and cos_i > 0.0:
+            c = (1.0 if delta else power_heuristic(p_l, pdf_b)) * cos_i * scale / p_l
+            return True, kd, km, s, c
+    return False, 0.0, 0.0, 0.0, 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
@@ -237,7 +266,6 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
     dim_roulette = bounce_dim(depth, DIM_ROULETTE)
     n_alive = 0
     n_sh = 0
-    lane_c = np.zeros(4, np.float32)
     rho_j = np.zeros(4, np.float64)   # ρ(λ_lab) of the hit's material per hero lane
     for i in range(n):
         pi = idx[i]
@@ -281,40 +309,31 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
         metal_delta = wm > 0.0 and a < DELTA_ALPHA
         wo = (-dx, -dy, -dz)
         eps = ray_offset_at(s_eps, p[0], p[1], p[2])
-        # ---- next-event estimation (the non-delta lobes only)
+        # ---- next-event estimation (the non-delta lobes only): one stratified pair
+        # picks the light (its first number then reused) and the point on it
         if wd + (0.0 if metal_delta else wm) > 0.0 and len(s_l_kind) > 0:
-            # one stratified pair picks the light (u_a, then reused, rescaled to [0, 1)
-            # inside the picked light's cdf interval) and the point on it
             u_a, u2 = sobol2(key, dim_light)
-            k, p_sel = select(s_l_cdf, u_a)
-            u1 = min((u_a - s_l_cdf[k]) / p_sel, ONE_MINUS) if p_sel > 0.0 else 0.0
+            k, p_sel, cdf_k = select(s_l_cdf, u_a)
             light = light_record(k, s_l_kind, s_l_prim, s_l_pos, s_l_dir, s_l_scale, s_l_spot,
                                  s_v0, s_e1, s_e2, s_ng, s_area, s_tri_mat, s_mat_one_sided)
-            wi, p_l, scale, delta, finite, target, ok = sample_light(light, p_sel, u1, u2, p[0],
-                                                                     p[1], p[2], eps)
-            if ok and p_l > 0.0 and scale > 0.0 and (wi[0] * g[0] + wi[1] * g[1]
-                                                     + wi[2] * g[2]) > 0.0:
-                kd, km, s, pdf_b = principled_eval(wo, wi, nrm, wd, wm, a2, wd, wm)
-                cos_i = wi[0] * nrm[0] + wi[1] * nrm[1] + wi[2] * nrm[2]
-                if pdf_b > 0.0 and cos_i > 0.0:
-                    c = (1.0 if delta else power_heuristic(p_l, pdf_b)) * cos_i * scale / p_l
-                    row = s_l_row[k]
-                    if e_row[pi] != row:
-                        e_row[pi] = row
-                        for j in range(nlanes):
-                            e_val[pi, j] = lerp(s_emit, row, li[pi, j], lf[pi, j])
+            wi, p_l, scale, delta, finite, target, ok = sample_light(
+                light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, p[0], p[1], p[2], eps)
+            ok, kd, km, s, c = nee_factors(wo, wi, nrm, g, p_l, scale, delta, ok, wd, wm, a2)
+            if ok:
+                row = s_l_row[k]
+                if e_row[pi] != row:  # the light's spectrum, cached per path
+                    e_row[pi] = row
                     for j in range(nlanes):
-                        lane_c[j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
-                            * e_val[pi, j]
-                    ox, oy, oz = p[0] + g[0] * eps, p[1] + g[1] * eps, p[2] + g[2] * eps
-                    sd, st = shadow_segment((ox, oy, oz), target, wi, finite)
-                    sh_idx[n_sh] = pi
-                    sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = ox, oy, oz
-                    sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]
-                    sh_t[n_sh] = st
-                    for j in range(nlanes):
-                        sh_c[n_sh, j] = lane_c[j]
-                    n_sh += 1
+                        e_val[pi, j] = lerp(s_emit, row, li[pi, j], lf[pi, j])
+                for j in range(nlanes):
+                    sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
+                        * e_val[pi, j]
+                so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
+                sh_idx[n_sh] = pi
+                sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = so[0], so[1], so[2]
+                sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]
+                sh_t[n_sh] = st
+                n_sh += 1
         # ---- the continuation
         u1, u2 = sobol2(key, dim_bsdf)
         wi, weight, pdf, delta, transmitted, ok = principled_sample(
@@ -325,7 +344,6 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
             thr[pi, j] *= lane_weight(weight, rho_j[j])
         prev_pdf[pi] = pdf
         prev_delta[pi] = 1 if delta else 0
-        off = -1.0 if transmitted else 1.0
         # ---- Russian roulette
         if depth + 1 >= RR_DEPTH:
             q = 0.0
@@ -338,9 +356,8 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
                     thr[pi, j] /= q
         k_a = n_alive
         idx[k_a] = pi
-        o[k_a, 0] = p[0] + g[0] * eps * off
-        o[k_a, 1] = p[1] + g[1] * eps * off
-        o[k_a, 2] = p[2] + g[2] * eps * off
+        q = offset_point(p, g, eps, -1.0 if transmitted else 1.0)
+        o[k_a, 0], o[k_a, 1], o[k_a, 2] = q[0], q[1], q[2]
         d[k_a, 0], d[k_a, 1], d[k_a, 2] = wi[0], wi[1], wi[2]
         n_alive += 1
     return n_alive, n_sh

@@ -134,10 +134,12 @@ def selection_pmf(power: np.ndarray, uniform_share: float = UNIFORM_SHARE) -> np
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def select(cdf, u):
-    """Index k with cdf[k] <= u < cdf[k+1], and its probability."""
+    """The light k with cdf[k] <= u < cdf[k+1], its probability p_sel = cdf[k+1] - cdf[k],
+    and cdf[k] (for :func:`sampling.rescale_uniform`: u reused inside the interval)."""
     k = np.searchsorted(cdf, u, side="right") - 1
     k = min(max(k, 0), len(cdf) - 2)
-    return k, cdf[k + 1] - cdf[k]
+    lo = cdf[k]
+    return k, cdf[k + 1] - lo, lo
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")

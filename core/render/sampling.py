@@ -319,6 +319,14 @@ def to_world(x, y, z, t, b, nx, ny, nz):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def rescale_uniform(u, lo, width):
+    """A uniform u known to lie in [lo, lo + width), mapped back to [0, 1): (u - lo)/width
+    (below 1; 0 for an empty interval). A discrete choice made with u thus leaves a
+    fresh uniform number for the next decision (pbrt-v4's SampleDiscrete)."""
+    return min((u - lo) / width, ONE_MINUS) if width > 0.0 else 0.0
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def power_heuristic(pa, pb):
     """Veach's power heuristic (β = 2): pa² / (pa² + pb²)."""
     a = pa * pa
