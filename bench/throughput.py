@@ -18,6 +18,7 @@ The module also holds the benchmark sections built on the meter (see
 from __future__ import annotations
 
 import argparse
+import inspect
 import math
 import statistics
 import threading
@@ -256,9 +257,18 @@ def shade_breakdown(bench: cm.RelrayBench, width: int = 128, height: int = 128,
     fr = bench.renderer(spp=1, width=width, height=height, threads=1)
     captured: list[list[Any]] = []
     orig = integrator_mod.shade
+    arg = {name: i for i, name in enumerate(inspect.signature(orig.py_func).parameters)}
+
+    def copy(x):
+        """Arrays copied, also inside the kernel's named tuples (shade writes in place)."""
+        if isinstance(x, np.ndarray):
+            return x.copy()
+        if isinstance(x, tuple) and hasattr(x, "_fields"):
+            return type(x)(*(copy(v) for v in x))
+        return x
 
     def record(*a):
-        captured.append([x.copy() if isinstance(x, np.ndarray) else x for x in a])
+        captured.append([copy(x) for x in a])
         return orig(*a)
 
     integrator_mod.shade = record
@@ -272,26 +282,26 @@ def shade_breakdown(bench: cm.RelrayBench, width: int = 128, height: int = 128,
     def best(f, args):
         ts = []
         for _ in range(reps):
-            a = [x.copy() if isinstance(x, np.ndarray) else x for x in args]
+            a = [copy(x) for x in args]
             t = time.thread_time()
             f(*a)
             ts.append(time.thread_time() - t)
-        return 1e9 * min(ts) / args[3]
+        return 1e9 * min(ts) / args[arg["n"]]
 
     rows = []
     for depth in depths:
-        args = next((a for a in captured if a[1] == depth), None)
+        args = next((a for a in captured if a[arg["depth"]] == depth), None)
         if args is None:
             continue
         if fast is not None:
             best(fast, args)  # compile
         no_nee = list(args)
-        no_nee[0] = args[0]._replace(l_kind=np.zeros(0, np.int32))
+        no_nee[arg["sc"]] = args[arg["sc"]]._replace(l_kind=np.zeros(0, np.int32))
         last = list(args)
-        last[2] = depth + 1
+        last[arg["max_depth"]] = depth + 1
         one = list(args)
-        one[18] = 1
-        rows.append({"depth": depth, "rays": args[3], "full_ns": best(orig, args),
+        one[arg["nlanes"]] = 1
+        rows.append({"depth": depth, "rays": args[arg["n"]], "full_ns": best(orig, args),
                      "no_nee_ns": best(orig, no_nee), "emission_only_ns": best(orig, last),
                      "one_lane_ns": best(orig, one),
                      "fastmath_ns": best(fast, args) if fast is not None else math.nan})

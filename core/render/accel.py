@@ -19,7 +19,7 @@ centre), so rays far from the world origin keep their precision near the geometr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from embreex import mesh_construction, rtcore_scene
@@ -28,8 +28,7 @@ MISS_DISTANCE = np.float32(1e30)
 _MISS_TFAR = float(MISS_DISTANCE)  # the initial tfar of intersect rays (exactly MISS_DISTANCE)
 
 
-@dataclass
-class Hits:
+class Hits(NamedTuple):
     """Nearest hits of a batch of rays (rest-frame quantities).
 
     ``t`` is the distance along the unit direction (``MISS_DISTANCE`` where nothing

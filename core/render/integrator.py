@@ -95,6 +95,38 @@ class KernelScene(NamedTuple):
     eps: float
 
 
+class Paths(NamedTuple):
+    """The state of a wavefront's paths (row: path)."""
+
+    keys: np.ndarray        # uint64 (N,): random-number keys (:mod:`.sampling`)
+    L: np.ndarray           # float32 (N, 4): lab radiance gathered per hero lane
+    thr: np.ndarray         # float32 (N, 4): throughput per hero lane
+    li: np.ndarray          # int32 (N, 4): table column of each lane (:func:`column_split`)
+    lf: np.ndarray          # float32 (N, 4): and its fraction
+    prev_pdf: np.ndarray    # float32 (N,): solid-angle pdf of the last BSDF sample
+    prev_delta: np.ndarray  # int32 (N,): 1 when that was a delta lobe (or the camera)
+    e_row: np.ndarray       # int32 (N,): emission row NEE looked up last (-1: none)
+    e_val: np.ndarray       # float32 (N, 4): its values per lane
+
+
+class Rays(NamedTuple):
+    """A wavefront's live rays, compacted in place by :func:`shade` (row: ray)."""
+
+    idx: np.ndarray  # int64 (N,): the ray's path
+    o: np.ndarray    # float32 (N, 3): origin (accelerator coordinates)
+    d: np.ndarray    # float32 (N, 3): unit direction
+
+
+class ShadowRays(NamedTuple):
+    """NEE's shadow rays and what each adds to its path unless occluded (row: ray)."""
+
+    idx: np.ndarray  # int64 (N,): the ray's path
+    o: np.ndarray    # float32 (N, 3)
+    d: np.ndarray    # float32 (N, 3)
+    t: np.ndarray    # float32 (N,): length
+    c: np.ndarray    # float32 (N, 4): contribution per hero lane
+
+
 def kernel_scene(accel: Accel, triangles: np.ndarray, normals: np.ndarray | None,
                  material_ids: np.ndarray, tables: SpectralTables, lights: LightTable,
                  geometry: dict[str, np.ndarray]) -> KernelScene:
@@ -233,17 +265,18 @@ def nee_factors(wo, wi, n, g, p_l, scale, delta, ok, wd, wm, a2):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
-def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L, li, lf,
-          prev_pdf, prev_delta, nlanes, sh_idx, sh_o, sh_d, sh_t, sh_c, sky_seen, e_row, e_val):
-    """One bounce for the live rays 0 ≤ i < n (ray i belongs to path ``idx[i]``):
-    hit → emission → next-event estimation → continuation → roulette.
+def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen):
+    """One bounce for the live rays 0 ≤ i < n of ``rays`` (:class:`Rays`; ray i belongs to
+    path ``rays.idx[i]`` of ``paths``, :class:`Paths`) and their ``hits``
+    (:class:`accel.Hits`): hit → emission → next-event estimation → continuation →
+    roulette.
 
     Adds emission seen by the ray (MIS-weighted against NEE), prepares one shadow ray
     (NEE) and samples the continuation.  The continuing rays are compacted *in place*
-    into the front of ``idx``, ``o`` and ``d`` (ray i is read before slot ≤ i is
-    written), the shadow rays into the front of the ``sh_*`` buffers.  Returns
-    (continuing rays, shadow rays).  ``sky_seen = False`` (a transparent film) hides the
-    sky from camera rays (depth 0) only.
+    into the front of ``rays`` (ray i is read before slot ≤ i is written), the shadow
+    rays into the front of ``shadows`` (:class:`ShadowRays`).  Returns (continuing rays,
+    shadow rays).  ``sky_seen = False`` (a transparent film) hides the sky from camera
+    rays (depth 0) only; ``nlanes`` is 4 (hero wavelengths) or 3 (rgb).
 
     Light sampling and its pdfs are :mod:`.lights`' (:func:`sample_light`,
     :func:`triangle_light_pdf`, :func:`sky_light_pdf`), every lobe's sampler and the
@@ -253,13 +286,17 @@ def shade(sc, depth, max_depth, n, idx, keys, o, d, t_hit, prim, bu, bv, thr, L,
     path the emission row that next-event estimation looked up last (``e_row`` = -1:
     none yet), so a path that keeps sampling the same light reads its spectrum once.
     """
-    # the scene's arrays as locals: reading them from the tuple inside the loop costs an
+    # the arrays as locals: reading them from the tuples inside the loop costs an
     # atomic reference-count increment and decrement per access (measured: ~40 % of the
     # kernel's time)
     (s_v0, s_e1, s_e2, s_ng, s_area, s_vn, s_has_vn, s_tri_mat, s_refl, s_emit, s_mat_w,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps) = sc
+    keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val = paths
+    idx, o, d = rays
+    t_hit, prim, bu, bv = hits
+    sh_idx, sh_o, sh_d, sh_t, sh_c = shadows
     dim_light = bounce_dim(depth, DIM_LIGHT)
     dim_lobe = bounce_dim(depth, DIM_LOBE)
     dim_bsdf = bounce_dim(depth, DIM_BSDF)
@@ -456,29 +493,27 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_loc
     """
     n = len(keys)
     b = wavefront_buffers(n, buffers)
-    L, thr, prev_pdf, prev_delta, idx = b["L"], b["thr"], b["prev_pdf"], b["prev_delta"], b["idx"]
-    li, lf, e_row, e_val = b["li"], b["lf"], b["e_row"], b["e_val"]
-    start_paths(L, thr, prev_pdf, prev_delta, idx, e_row)
+    paths = Paths(keys, b["L"], b["thr"], b["li"], b["lf"], b["prev_pdf"], b["prev_delta"],
+                  b["e_row"], b["e_val"])
+    start_paths(paths.L, paths.thr, paths.prev_pdf, paths.prev_delta, b["idx"], paths.e_row)
     # shade compacts the rays in place: float32 C-contiguous inputs are used (and
     # overwritten) as they are, anything else is converted once
-    o = np.ascontiguousarray(o_local, np.float32)
-    d = np.ascontiguousarray(d, np.float32)
-    sh_idx, sh_o, sh_d, sh_t, sh_c = b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"]
-    column_split(lamu, sc.emit.shape[1], li, lf)
+    rays = Rays(b["idx"], np.ascontiguousarray(o_local, np.float32),
+                np.ascontiguousarray(d, np.float32))
+    shadows = ShadowRays(b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"])
+    column_split(lamu, sc.emit.shape[1], paths.li, paths.lf)
     first_t = None
     m = n
     for depth in range(max_depth):
-        hits = accel.intersect(o[:m], d[:m])
+        hits = accel.intersect(rays.o[:m], rays.d[:m])
         if depth == 0:
             first_t = hits.t
-        m, ns = shade(sc, depth, max_depth, m, idx, keys, o, d, hits.t, hits.prim, hits.u,
-                      hits.v, thr, L, li, lf, prev_pdf, prev_delta, nlanes, sh_idx, sh_o,
-                      sh_d, sh_t, sh_c, sky_seen, e_row, e_val)
+        m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen)
         if ns:
-            blocked = accel.occluded(sh_o[:ns], sh_d[:ns], sh_t[:ns])
-            add_shadows(sh_idx[:ns], blocked, sh_c[:ns], L, nlanes)
+            blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns])
+            add_shadows(shadows.idx[:ns], blocked, shadows.c[:ns], paths.L, nlanes)
         if m == 0:
             break
     if first_t is None:
         first_t = np.full(n, MISS_DISTANCE, np.float32)
-    return L, first_t
+    return paths.L, first_t
