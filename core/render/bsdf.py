@@ -230,6 +230,14 @@ def lane_value(kd, km, s, rho):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def has_smooth_lobe(wd, wm, alpha):
+    """Whether a material with lobe weights w_d, w_m and GGX α has a non-delta lobe (one
+    that next-event estimation can serve): diffuse, or a metal rougher than
+    ``DELTA_ALPHA``."""
+    return wd + (0.0 if wm > 0.0 and alpha < DELTA_ALPHA else wm) > 0.0
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def principled_sample(wo, n, g, front, wd, wm, wg, alpha, ior, ul, u1, u2):
     """The continuation from a material: ``ul`` picks a lobe by its weight ([0, w_g)
     glass, [w_g, w_g + w_m) metal, the rest diffuse), (u1, u2) its direction.

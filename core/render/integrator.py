@@ -33,7 +33,13 @@ from numba import njit
 from ..physics import spectrum
 from ..scene.geometry import ray_offset, ray_offset_at
 from .accel import MISS_DISTANCE, Accel
-from .bsdf import DELTA_ALPHA, lane_value, lane_weight, principled_eval, principled_sample
+from .bsdf import (
+    has_smooth_lobe,
+    lane_value,
+    lane_weight,
+    principled_eval,
+    principled_sample,
+)
 from .lights import (
     LightTable,
     light_record,
@@ -278,10 +284,13 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
     shadow rays).  ``sky_seen = False`` (a transparent film) hides the sky from camera
     rays (depth 0) only; ``nlanes`` is 4 (hero wavelengths) or 3 (rgb).
 
-    Light sampling and its pdfs are :mod:`.lights`' (:func:`sample_light`,
-    :func:`triangle_light_pdf`, :func:`sky_light_pdf`), every lobe's sampler and the
-    mixture's eval/pdf are :mod:`.bsdf`'s, the random numbers' dimensions
-    :mod:`.sampling`'s layout (:func:`bounce_dim`).  Spectral lookups use the paths'
+    Light selection, sampling and pdfs are :mod:`.lights`' (:func:`select`,
+    :func:`sample_light`, :func:`triangle_light_pdf`, :func:`sky_light_pdf`); the
+    material's eval/pdf and its lobe sampling are :mod:`.bsdf`'s
+    (:func:`principled_eval`, :func:`principled_sample`); the random numbers' dimensions
+    :mod:`.sampling`'s layout (:func:`bounce_dim`); the ray offset ε
+    :func:`scene.geometry.ray_offset_at`'s.  All vectors are in the lab frame, where
+    the static scene is at rest (accelerator coordinates).  Spectral lookups use the paths'
     table columns ``li``/``lf`` (:func:`column_split`); ``e_row``/``e_val`` cache per
     path the emission row that next-event estimation looked up last (``e_row`` = -1:
     none yet), so a path that keeps sampling the same light reads its spectrum once.
@@ -343,12 +352,11 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
                 rho_j[j] = lerp(s_refl, m, li[pi, j], lf[pi, j])
         a = s_mat_alpha[m]
         a2 = a * a
-        metal_delta = wm > 0.0 and a < DELTA_ALPHA
         wo = (-dx, -dy, -dz)
         eps = ray_offset_at(s_eps, p[0], p[1], p[2])
         # ---- next-event estimation (the non-delta lobes only): one stratified pair
         # picks the light (its first number then reused) and the point on it
-        if wd + (0.0 if metal_delta else wm) > 0.0 and len(s_l_kind) > 0:
+        if has_smooth_lobe(wd, wm, a) and len(s_l_kind) > 0:
             u_a, u2 = sobol2(key, dim_light)
             k, p_sel, cdf_k = select(s_l_cdf, u_a)
             light = light_record(k, s_l_kind, s_l_prim, s_l_pos, s_l_dir, s_l_scale, s_l_spot,
@@ -393,8 +401,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
                     thr[pi, j] /= q
         k_a = n_alive
         idx[k_a] = pi
-        q = offset_point(p, g, eps, -1.0 if transmitted else 1.0)
-        o[k_a, 0], o[k_a, 1], o[k_a, 2] = q[0], q[1], q[2]
+        o_next = offset_point(p, g, eps, -1.0 if transmitted else 1.0)
+        o[k_a, 0], o[k_a, 1], o[k_a, 2] = o_next[0], o_next[1], o_next[2]
         d[k_a, 0], d[k_a, 1], d[k_a, 2] = wi[0], wi[1], wi[2]
         n_alive += 1
     return n_alive, n_sh
