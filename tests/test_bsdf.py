@@ -17,8 +17,7 @@ def _ggx_samples(wo, alpha, u1, u2):
     out = np.empty((len(u1), 5))
     for i in range(len(u1)):
         h = bsdf.ggx_sample_h(wo, n, alpha, u1[i], u2[i])
-        c = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2]
-        wi = (2 * c * h[0] - wo[0], 2 * c * h[1] - wo[1], 2 * c * h[2] - wo[2])
+        wi = bsdf.reflect(wo, h, wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2])
         f, p = bsdf.ggx_eval(wo[2], wi[2], h[2], a2)
         out[i, 0], out[i, 1], out[i, 2] = wi
         out[i, 3], out[i, 4] = f, p
@@ -130,52 +129,58 @@ def test_lambert_white_furnace_is_exactly_one():
 # As Mitsuba 3 tests each BSDF: draw N directions with a lobe's sampler, bin them in
 # (cos θ, φ) about n = +z, and compare the counts with N × the lobe's pdf integrated over
 # each bin (a SUB×SUB midpoint rule inside every bin). Bins expecting fewer than 5 samples
-# are pooled; directions below the horizon (rejected by the integrator) form one more
-# bin expecting N (1 - ∫ pdf). The samples are a fixed deterministic set, so a test does
-# not flicker; a correct sampler passes at the significance SIGNIFICANCE, a sampler
-# checked against a wrong pdf fails (test_chi_square_detects_a_wrong_pdf).
+# are pooled; directions the sampler refuses or puts below the horizon form one more bin
+# expecting N (1 - ∫ pdf). The samples are a fixed deterministic set, so a test does not
+# flicker. Pearson's statistic is compared with the χ² distribution (scipy): a correct
+# sampler passes at the significance SIGNIFICANCE (a false failure once in 1000 sample
+# sets), a sampler checked against a wrong pdf fails (test_chi_square_detects_*).
 
 SIGNIFICANCE = 1e-3
 SUB = 24  # midpoint rule per bin side: resolves the peak of α = 0.15 at grazing wo
 N_COS, N_PHI, N_SAMPLES = 16, 32, 200_000
+LAMBERT, GGX, MIXTURE, UNIFORM = 0, 1, 2, 3
+W_D, W_M = 0.4, 0.6  # the mixture's lobe weights
 
 
 @njit(cache=True)
-def _sample_lobe(kind, wo, alpha, u1, u2):
-    """Directions from one lobe: 0 Lambert, 1 GGX, 2 the mixture (w_d 0.4, w_m 0.6)."""
+def _sample_lobe(kind, wo, alpha, ul, u1, u2):
+    """Directions from a lobe's sampler (NaN where the sampler refuses): Lambert, GGX, or
+    the material's one-sample mixture (principled_sample, w_d 0.4, w_m 0.6, lobe by ul)."""
     n = (0.0, 0.0, 1.0)
     out = np.empty((len(u1), 3))
     for i in range(len(u1)):
-        if kind == 0:
+        if kind == LAMBERT:
             wi = bsdf.lambert_sample(n, u1[i], u2[i])
-        elif kind == 1:
+        elif kind == GGX:
             wi = bsdf.ggx_sample(wo, n, alpha, u1[i], u2[i])
         else:
-            # the integrator's lobe pick: u1 < 0.6 chooses the conductor, rescaled
-            if u1[i] < 0.6:
-                wi = bsdf.ggx_sample(wo, n, alpha, u1[i] / 0.6, u2[i])
-            else:
-                wi = bsdf.lambert_sample(n, (u1[i] - 0.6) / 0.4, u2[i])
+            wi, _, _, delta, _, ok = bsdf.principled_sample(wo, n, n, True, W_D, W_M, 0.0,
+                                                            alpha, 1.5, ul[i], u1[i], u2[i])
+            if not ok or delta:
+                wi = (math.nan, math.nan, math.nan)
         out[i, 0], out[i, 1], out[i, 2] = wi
     return out
 
 
 @njit(cache=True)
 def _lobe_pdf(kind, wo, alpha, wi):
+    """The pdf the product gives each lobe (UNIFORM: a deliberately wrong one)."""
     n = (0.0, 0.0, 1.0)
-    a2 = alpha * alpha
     if wi[2] <= 0.0:
         return 0.0
-    if kind == 0:
-        return wi[2] * bsdf.INV_PI
-    if kind == 3:  # a wrong pdf: uniform on the hemisphere
+    if kind == LAMBERT:
+        return bsdf.lambert_eval(wi[2])[1]
+    if kind == GGX:
+        h = (wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2])
+        return bsdf.ggx_eval(wo[2], wi[2], h[2] / math.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2),
+                             alpha * alpha)[1]
+    if kind == UNIFORM:
         return 1.0 / (2.0 * math.pi)
-    wd, wm = (0.0, 1.0) if kind == 1 else (0.4, 0.6)
-    return bsdf.principled_eval(wo, wi, n, wd, wm, a2, wd, wm)[3]
+    return bsdf.principled_eval(wo, wi, n, W_D, W_M, alpha * alpha, W_D, W_M)[3]
 
 
 @njit(cache=True)
-def _expected_counts(kind, wo, alpha, n_cos, n_phi, sub):
+def _bin_integrals(kind, wo, alpha, n_cos, n_phi, sub):
     """∫ pdf dω over each (cos θ, φ) bin of the upper hemisphere (midpoint rule)."""
     out = np.zeros((n_cos, n_phi))
     dc, dp = 1.0 / n_cos, 2.0 * math.pi / n_phi
@@ -192,17 +197,21 @@ def _expected_counts(kind, wo, alpha, n_cos, n_phi, sub):
     return out
 
 
-def chi_square_p(kind_sample: int, kind_pdf: int, wo, alpha: float) -> float:
+def chi_square_p(kind_sample: int, kind_pdf: int, wo, alpha: float, alpha_pdf=None) -> float:
+    """The p-value of Pearson's χ² for the sampler ``kind_sample`` against the pdf
+    ``kind_pdf`` (of roughness ``alpha_pdf``, by default the sampler's)."""
     from scipy import stats
 
     u1, u2 = _uniforms(N_SAMPLES, 11)
-    wi = _sample_lobe(kind_sample, wo, alpha, u1, u2)
-    above = wi[:, 2] > 0.0
+    ul, _ = _uniforms(N_SAMPLES, 13)
+    wi = _sample_lobe(kind_sample, wo, alpha, ul, u1, u2)
+    above = wi[:, 2] > 0.0  # False for NaN (refused) too
     cos_t = np.clip(wi[above, 2], 0.0, 1.0 - 1e-12)
     phi = np.mod(np.arctan2(wi[above, 1], wi[above, 0]), 2 * math.pi)
     observed, _, _ = np.histogram2d(cos_t, phi, bins=(N_COS, N_PHI),
                                     range=((0, 1), (0, 2 * math.pi)))
-    expected = N_SAMPLES * _expected_counts(kind_pdf, wo, alpha, N_COS, N_PHI, SUB)
+    expected = N_SAMPLES * _bin_integrals(kind_pdf, wo, alpha if alpha_pdf is None
+                                          else alpha_pdf, N_COS, N_PHI, SUB)
     obs = np.append(observed.ravel(), (~above).sum())
     exp = np.append(expected.ravel(), max(N_SAMPLES - expected.sum(), 0.0))
     order = np.argsort(exp)  # pool the smallest bins until each pooled bin expects >= 5
@@ -223,26 +232,76 @@ def chi_square_p(kind_sample: int, kind_pdf: int, wo, alpha: float) -> float:
 
 
 def test_chi_square_lambert():
-    assert chi_square_p(0, 0, (0.0, 0.6, 0.8), 0.0) > SIGNIFICANCE
+    assert chi_square_p(LAMBERT, LAMBERT, (0.0, 0.6, 0.8), 0.0) > SIGNIFICANCE
 
 
 @pytest.mark.parametrize("alpha", [0.15, 0.4, 0.8])
 @pytest.mark.parametrize("theta_o", [0.2, 0.9, 1.4])
 def test_chi_square_ggx_conductor(alpha, theta_o):
     wo = (math.sin(theta_o), 0.0, math.cos(theta_o))
-    assert chi_square_p(1, 1, wo, alpha) > SIGNIFICANCE
+    assert chi_square_p(GGX, GGX, wo, alpha) > SIGNIFICANCE
 
 
 @pytest.mark.parametrize("theta_o", [0.3, 1.1])
 def test_chi_square_lobe_mixture_matches_principled_eval(theta_o):
-    """The integrator's one-sample lobe choice has the density principled_eval returns."""
+    """principled_sample's one-sample lobe choice has the density principled_eval returns."""
     wo = (math.sin(theta_o), 0.0, math.cos(theta_o))
-    assert chi_square_p(2, 2, wo, 0.3) > SIGNIFICANCE
+    assert chi_square_p(MIXTURE, MIXTURE, wo, 0.3) > SIGNIFICANCE
 
 
 def test_chi_square_detects_a_wrong_pdf():
-    """The test can fail: Lambert samples against a uniform-hemisphere pdf."""
-    assert chi_square_p(0, 3, (0.0, 0.0, 1.0), 0.0) < 1e-12
+    """The test can fail: Lambert samples against a uniform-hemisphere pdf, and GGX
+    samples of α = 0.4 against the pdf of α = 0.44 (10 % off)."""
+    assert chi_square_p(LAMBERT, UNIFORM, (0.0, 0.0, 1.0), 0.0) < 1e-12
+    wo = (math.sin(0.9), 0.0, math.cos(0.9))
+    assert chi_square_p(GGX, GGX, wo, 0.4, alpha_pdf=0.44) < SIGNIFICANCE
+
+
+@pytest.mark.parametrize("kind, alpha, theta_o", [(LAMBERT, 0.0, 0.0), (GGX, 0.15, 1.4),
+                                                  (GGX, 0.8, 0.2), (MIXTURE, 0.3, 1.1)])
+def test_pdfs_integrate_to_at_most_one(kind, alpha, theta_o):
+    """∫ pdf dω over the hemisphere: 1 for Lambert (the midpoint rule is exact for cos θ;
+    1/π is a float32, 4e-8 low);
+    at most 1 for GGX and the mixture, whose missing mass is the share of samples the
+    sampler puts below the horizon (the chi-square's extra bin)."""
+    wo = (math.sin(theta_o), 0.0, math.cos(theta_o))
+    total = _bin_integrals(kind, wo, alpha, N_COS, N_PHI, SUB).sum()
+    if kind == LAMBERT:
+        assert total == pytest.approx(1.0, abs=1e-7)
+    else:
+        assert 0.5 < total <= 1.0 + 2e-3
+
+
+def test_principled_sample_picks_lobes_by_weight_with_their_throughput():
+    """ul picks glass, metal, diffuse with probabilities w_g, w_m, w_d (χ²); glass gives
+    the factor 1 (reflected) or 1/η² (transmitted), the mirror ρ + (1 - ρ)(1 - cos θ_o)⁵,
+    a smooth lobe f cos θ_i / pdf of principled_eval."""
+    from scipy import stats
+
+    wo, n = (0.6, 0.0, 0.8), (0.0, 0.0, 1.0)
+    wd, wm, wg, rho = 0.2, 0.3, 0.5, 0.7
+    ul, u1 = _uniforms(30_000, 17)
+    _, u2 = _uniforms(30_000, 19)
+    counts = np.zeros(3)
+    for a, b, c in zip(ul, u1, u2, strict=True):
+        wi, w, pdf, delta, transmitted, ok = bsdf.principled_sample(
+            wo, n, n, True, wd, wm, wg, 1e-4, 1.5, a, b, c)
+        assert ok
+        if a < wg:
+            counts[0] += 1
+            assert delta and pdf == 0.0
+            assert bsdf.lane_weight(w, rho) == (1 / 1.5**2 if transmitted else 1.0)
+        elif a < wg + wm:
+            counts[1] += 1
+            assert delta and wi == pytest.approx((-0.6, 0.0, 0.8))
+            assert bsdf.lane_weight(w, rho) == pytest.approx(rho + (1 - rho) * 0.2**5)
+        else:
+            counts[2] += 1
+            kd, km, s, p = bsdf.principled_eval(wo, wi, n, wd, wm, 1e-8, wd, wm)
+            assert not delta and pdf == pytest.approx(p)
+            assert bsdf.lane_weight(w, rho) == pytest.approx(
+                bsdf.lane_value(kd, km, s, rho) * wi[2] / p)
+    assert stats.chisquare(counts, 30_000 * np.array([wg, wm, wd])).pvalue > SIGNIFICANCE
 
 
 @pytest.mark.parametrize("cos_o, eta", [(0.9, 1.5), (0.3, 1.5), (0.8, 1 / 1.5), (0.2, 1 / 1.5)])
