@@ -182,3 +182,15 @@ def test_sincos_2pi_matches_libm():
     c, s = _sincos_all(u)
     assert np.max(np.abs(c - np.cos(2 * np.pi * u))) < 2e-9
     assert np.max(np.abs(s - np.sin(2 * np.pi * u))) < 2e-9
+
+
+def test_the_dimension_layout_gives_every_decision_its_own_index():
+    """sampling's named layout: the camera's indices lie below DIMS_CAMERA, each bounce's
+    below DIMS_PER_BOUNCE, and bounce_dim never gives two decisions of a path (camera or
+    any bounce) the same index."""
+    camera = [sampling.DIM_PIXEL, sampling.DIM_WAVELENGTH]
+    bounce = [sampling.DIM_LIGHT, sampling.DIM_LOBE, sampling.DIM_BSDF, sampling.DIM_ROULETTE]
+    assert len(set(camera)) == len(camera) and max(camera) < sampling.DIMS_CAMERA
+    assert len(set(bounce)) == len(bounce) and max(bounce) < sampling.DIMS_PER_BOUNCE
+    used = camera + [sampling.bounce_dim(depth, off) for depth in range(64) for off in bounce]
+    assert len(set(used)) == len(used)
