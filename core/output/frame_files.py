@@ -5,8 +5,10 @@ metadata they record, whether a frame is already done (resume: the recorded
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +20,7 @@ from ..physics import relativity
 from ..render.film import Film
 from ..scene.description import Job
 from ..scene.motion import frame_events
+from ..scene.names import NAME_MAX_BYTES, format_frame_name
 from .digest import METADATA_KEY, frame_digest, job_digest
 from .imageio import (
     frame_complete,
@@ -28,27 +31,66 @@ from .imageio import (
     write_frame,
 )
 
-WINDOWS_RESERVED = frozenset({"CON", "PRN", "AUX", "NUL", *(f"COM{i}" for i in range(1, 10)),
-                              *(f"LPT{i}" for i in range(1, 10))})
-"""File names Windows refuses whatever their extension (frames travel to artists' PCs)."""
-NAME_MAX_BYTES = 255
-"""Longest file name (one path component, UTF-8 bytes) on Linux, macOS and Windows."""
+WINDOWS_RESERVED = frozenset({
+    "CON", "PRN", "AUX", "NUL", "CLOCK$", "CONIN$", "CONOUT$",
+    *(f"{port}{n}" for port in ("COM", "LPT") for n in (*"0123456789", "\u00b9", "\u00b2",
+                                                          "\u00b3"))})
+"""File names Windows refuses whatever their extension (frames travel to artists' PCs):
+the DOS devices, COM0-9 and LPT0-9 also with a superscript 1, 2 or 3."""
 _WINDOWS_FORBIDDEN = set('<>:"|?*')
+_INVISIBLE = {"Cc": "a control character", "Cf": "an invisible formatting character",
+              "Cs": "a lone surrogate (not UTF-8)", "Zl": "a line separator",
+              "Zp": "a paragraph separator"}
+"""Unicode categories refused in names: controls (C0 and C1), bidirectional overrides and
+zero-width characters (a name that displays as another), what UTF-8 cannot encode and
+what splits a line."""
+SHOWN_NAME_CHARS = 60
+"""A name quoted in an error message is cut to this many characters."""
 
 
 def frame_stem(job: Job, frame: int) -> str:
-    """The file name (without extension) of ``frame``: ``output.name`` formatted."""
-    return job.output.name.format(frame=frame)
+    """The file name (without extension) of ``frame``: ``output.name`` formatted
+    (:func:`..scene.names.format_frame_name`; a ValueError for a template it refuses)."""
+    return format_frame_name(job.output.name, frame)
+
+
+def shown(name: str) -> str:
+    """``name`` quoted for a one-line message (``repr``: what does not print is
+    escaped), cut when long."""
+    if len(name) <= SHOWN_NAME_CHARS:
+        return repr(name)
+    return repr(name[:SHOWN_NAME_CHARS])[:-1] + f"...' ({len(name)} characters)"
+
+
+def frame_file_names(stem: str) -> list[str]:
+    """Every file name a frame called ``stem`` can have: each format's file
+    (:func:`.imageio.frame_paths`), whatever ``output.formats`` says."""
+    return [stem + suffix for suffix in _suffixes()]
+
+
+@functools.cache
+def _suffixes() -> tuple[str, ...]:
+    """What :func:`.imageio.frame_paths` appends to a frame's name (".exr", ...)."""
+    return tuple(p.name[1:] for p in frame_paths(Path("."), "x").values())
+
+
+@functools.cache
+def _longest_extra_bytes() -> int:
+    """The most bytes any frame file's (temporary) name adds to its stem."""
+    return max(temp_name_max_bytes("x" + suffix) - 1 for suffix in _suffixes())
 
 
 def name_problem(stem: str) -> str | None:
     """Why ``stem`` cannot be a frame's file name, or None.
 
     A name is exactly one path component inside ``output.dir``: not empty, no ``/`` or
-    ``\\``, not ``.`` or ``..``, no NUL or control character, none of Windows' ``<>:"|?*``,
-    no trailing dot or space, not a Windows device name (CON, NUL, COM1 ...), and short
-    enough that its longest file (``<stem>.spectral.exr``, or the temporary name it is
-    written under first) stays within :data:`NAME_MAX_BYTES`.
+    ``\\``, not ``.`` or ``..`` and not starting with a dot (a hidden file, and
+    relray's temporary files start with one), no NUL, control (C0 or C1), invisible
+    formatting (bidirectional overrides, zero-width) or line-separating character, none
+    of Windows' ``<>:"|?*``, no trailing dot or space, not a Windows device name (CON,
+    NUL, COM1, LPT\u00b9 ... with any extension, any case), and short enough that its
+    longest file (``<stem>.spectral.exr``, or the temporary name it is written under
+    first) stays within :data:`NAME_MAX_BYTES` bytes of UTF-8.
     """
     if not stem:
         return "is empty"
@@ -56,38 +98,62 @@ def name_problem(stem: str) -> str | None:
         return "contains a path separator (a frame's name is one file name in output.dir)"
     if stem in (".", ".."):
         return f"is '{stem}', a folder reference"
-    if any(ord(c) < 32 or ord(c) == 127 for c in stem):
-        return "contains a control character"
+    if not (stem.isascii() and stem.isprintable()):
+        for c in stem:
+            category = unicodedata.category(c)
+            if category in _INVISIBLE:
+                return f"contains {_INVISIBLE[category]} (U+{ord(c):04X})"
+    if stem.startswith("."):
+        return "starts with a dot (a hidden file; relray's temporary files start with one)"
     if any(c in _WINDOWS_FORBIDDEN for c in stem):
         return 'contains one of <>:"|?* (not allowed in Windows file names)'
     if stem[-1] in ". ":
         return "ends with a dot or a space (Windows drops them)"
     if stem.split(".")[0].rstrip(" ").upper() in WINDOWS_RESERVED:
-        return "is a Windows device name (CON, PRN, AUX, NUL, COM1-9, LPT1-9)"
-    longest = max(temp_name_max_bytes(p.name) for p in frame_paths(Path("."), stem).values())
+        return "is a Windows device name (CON, PRN, AUX, NUL, COM0-9, LPT0-9 ...)"
+    longest = len(stem.encode()) + _longest_extra_bytes()
     if longest > NAME_MAX_BYTES:
         return f"makes a {longest}-byte file name; at most {NAME_MAX_BYTES} bytes"
     return None
 
 
-def check_frame_names(job: Job, frames: list[int]) -> None:
-    """Every frame's file name is valid and no two frames share one, before anything
-    renders (a UserError naming ``output.name`` and the job file, else nothing)."""
-    seen: dict[str, int] = {}
-    for frame in frames:
+def name_check_frames(job: Job) -> list[int]:
+    """The frames whose names :func:`plan_frames` checks: the job's whole range
+    (``motion.frames``), whatever ``--frames`` selects, so that runs of different
+    sub-ranges (farm slices) can never write the same file."""
+    first, last = job.motion.frames
+    sub = job.motion.render_frames or (first, last)
+    return list(range(min(first, sub[0]), max(last, sub[1]) + 1))
+
+
+def check_frame_names(job: Job, frames: list[int] | None = None) -> None:
+    """Every frame's file name is valid and no two frames share a file, before anything
+    renders: a UserError naming ``output.name`` and the job file, else nothing.
+
+    ``frames``: by default :func:`name_check_frames`. Two names that differ only in case
+    or Unicode normalisation are the same file on Windows and macOS, so they clash too.
+    """
+    seen: dict[str, tuple[int, str]] = {}
+    for frame in name_check_frames(job) if frames is None else frames:
         try:
             stem = frame_stem(job, frame)
-        except (KeyError, IndexError, ValueError, AttributeError, TypeError) as e:
-            raise UserError(f"'{job.output.name}' cannot name frame {frame}: {e!r}",
+        except (KeyError, IndexError, ValueError, AttributeError, TypeError,
+                OverflowError) as e:
+            raise UserError(f"{shown(job.output.name)} cannot name frame {frame}: {e}",
                             key="output.name", file=job.path) from None
         problem = name_problem(stem)
         if problem is not None:
-            raise UserError(f"frame {frame}'s name {stem!r} {problem}", key="output.name",
-                            file=job.path)
-        other = seen.setdefault(stem.casefold(), frame)
-        if other != frame:
-            raise UserError(f"frames {other} and {frame} would both be written as {stem!r}; "
-                            "use {frame} in the name", key="output.name", file=job.path)
+            raise UserError(f"frame {frame}'s name {shown(stem)} {problem}",
+                            key="output.name", file=job.path)
+        folded = unicodedata.normalize("NFC", stem).casefold()
+        for suffix in _suffixes():
+            name = stem + suffix
+            other, other_name = seen.setdefault(folded + suffix, (frame, name))
+            if other != frame:
+                same = "" if other_name == name else f" and {shown(other_name)}"
+                raise UserError(f"frames {other} and {frame} would both be written as "
+                                f"{shown(name)}{same}; use {{frame}} in the name",
+                                key="output.name", file=job.path)
 
 
 def check_output_dir(job: Job) -> None:
@@ -161,12 +227,12 @@ class FramePlan:
 def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
     """The frames to render: all with ``overwrite``, else those not done.
 
-    First checks every frame's file name (:func:`check_frame_names`) and the output
-    folder (:func:`check_output_dir`); also removes stale
-    temporary files of interrupted writes from the output folder.
+    First checks every frame's file name (:func:`check_frame_names`: the job's whole
+    range, not only ``--frames``) and the output folder (:func:`check_output_dir`); also
+    removes stale temporary files of interrupted writes from the output folder.
     """
+    check_frame_names(job)
     events = frame_events(job)
-    check_frame_names(job, [f for f, _ in events])
     check_output_dir(job)
     base = job_digest(job)
     states = {f: "missing" if overwrite else frame_state(job, f, ev, base) for f, ev in events}
