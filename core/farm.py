@@ -534,6 +534,7 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
     slots = host_slots(client)
     frame, ev = todo
     t0 = time.perf_counter()
+    digest = frame_digest(job, frame, ev)  # before any worker loads the input files
     index: dict[str, int] = {}
     futures = []
     for k, r in enumerate(ranges):
@@ -580,7 +581,7 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
         raise
     seconds = time.perf_counter() - t0
     paths = write_film(job, frame, ev, merged, sensor_to_rgb(job.render.spectral), seconds,
-                       (d_min, d_max))
+                       (d_min, d_max), digest)
     result.written += paths
     result.rendered.append(frame)
     reporter.frame_done(frame, paths, seconds, (d_min, d_max))

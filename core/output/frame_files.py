@@ -9,7 +9,8 @@ import functools
 import logging
 import os
 import unicodedata
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -21,16 +22,18 @@ from ..render.film import Film
 from ..scene.description import Job
 from ..scene.motion import frame_events
 from ..scene.names import NAME_MAX_BYTES, format_frame_name
-from .digest import METADATA_KEY, frame_digest, job_digest
+from .digest import METADATA_KEY, frame_digest, job_digest, renderer_identity
 from .imageio import (
     frame_complete,
     frame_paths,
     metadata_for,
+    read_metadata,
     remove_stale_temps,
     temp_name_max_bytes,
     write_frame,
 )
 
+RENDERER_KEY = "relray:renderer"
 WINDOWS_RESERVED = frozenset({
     "CON", "PRN", "AUX", "NUL", "CLOCK$", "CONIN$", "CONOUT$",
     *(f"{port}{n}" for port in ("COM", "LPT") for n in (*"0123456789", "\u00b9", "\u00b2",
@@ -172,12 +175,40 @@ def check_output_dir(job: Job) -> None:
 
 def frame_metadata(job: Job, frame: int, event: relativity.ShutterEvent,
                    digest: str | None = None) -> dict[str, str]:
-    """What a finished frame records; ``relray:digest`` is what resume compares."""
+    """What a finished frame records; ``relray:digest`` is what resume compares,
+    ``relray:renderer`` (:func:`.digest.renderer_identity` of the process that wrote
+    it) only says why a stale frame is stale."""
     return metadata_for(frame, event.beta, float(event.tau), job.render.spp,
                         extra={"relray:spectral": job.render.spectral,
                                "relray:t_lab": repr(float(event.t)),
                                "relray:seed": str(job.render.seed),
+                               RENDERER_KEY: renderer_identity(),
                                METADATA_KEY: digest or frame_digest(job, frame, event)})
+
+
+def _record_path(job: Job, frame: int) -> Path:
+    """The file whose metadata stands for the frame: the EXR, else the PNG, else the
+    spectral EXR (written last of the requested formats)."""
+    paths = frame_paths(job.output.dir, frame_stem(job, frame))
+    return next(paths[f] for f in ("exr", "png", "spectral-exr") if f in job.output.formats)
+
+
+STALE_REASONS = {
+    "job": "the job or an input file changed",
+    "renderer": "the renderer changed",
+    "no digest": "written by a relray without resume digests",
+}
+"""Why a finished frame is rendered again (:func:`stale_reason`), as the plan says it."""
+
+
+def stale_reason(job: Job, frame: int) -> str:
+    """A key of :data:`STALE_REASONS` for a frame :func:`frame_state` found "stale"."""
+    meta = read_metadata(_record_path(job, frame))
+    if METADATA_KEY not in meta:
+        return "no digest"
+    if meta.get(RENDERER_KEY) != renderer_identity():
+        return "renderer"
+    return "job"
 
 
 def frame_state(job: Job, frame: int, event: relativity.ShutterEvent,
@@ -194,7 +225,7 @@ def frame_state(job: Job, frame: int, event: relativity.ShutterEvent,
     paths = frame_paths(job.output.dir, frame_stem(job, frame))
     if not all(is_regular_file(paths[f]) for f in job.output.formats):
         return "missing"
-    record = next(paths[f] for f in ("exr", "png", "spectral-exr") if f in job.output.formats)
+    record = _record_path(job, frame)
     digest = digest or frame_digest(job, frame, event, base)
     if frame_complete(record, {METADATA_KEY: digest}):
         return "done"
@@ -217,6 +248,13 @@ class FramePlan:
     stale_temps_removed: int = 0
     stale: int = 0
     """Frames in ``todo`` whose files were finished by a different job or renderer."""
+    stale_reasons: dict[str, int] = field(default_factory=dict)
+    """How many stale frames for each reason (keys of :data:`STALE_REASONS`)."""
+    digests: dict[int, str] = field(default_factory=dict)
+    """Each frame's digest as planned: what its files were compared with and what the
+    frame must record when written (:func:`write_film`'s ``digest``). Computed before the
+    renderer loads any input file, so that a file edited while frames render makes them
+    stale on the next run instead of being recorded as the content they show."""
 
     @property
     def done(self) -> int:
@@ -235,18 +273,23 @@ def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
     events = frame_events(job)
     check_output_dir(job)
     base = job_digest(job)
-    states = {f: "missing" if overwrite else frame_state(job, f, ev, base) for f, ev in events}
+    digests = {f: frame_digest(job, f, ev, base) for f, ev in events}
+    states = {f: "missing" if overwrite else frame_state(job, f, ev, digest=digests[f])
+              for f, ev in events}
     todo = [(f, ev) for f, ev in events if states[f] != "done"]
     removed = remove_stale_temps(job.output.dir) if job.output.dir.is_dir() else 0
-    stale = sum(1 for s in states.values() if s == "stale")
-    return FramePlan([f for f, _ in events], todo, removed, stale)
+    reasons = Counter(stale_reason(job, f) for f, s in states.items() if s == "stale")
+    return FramePlan([f for f, _ in events], todo, removed, sum(reasons.values()),
+                     dict(sorted(reasons.items())), digests)
 
 
 def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
                to_rgb: np.ndarray, seconds: float, d_range: tuple[float, float],
                digest: str | None = None) -> list:
     """Resolve ``film`` and write the frame's files atomically (EXR last); return the paths.
-    They record ``digest`` (default: :func:`.digest.frame_digest` of this process)."""
+    They record ``digest``: the plan's (:attr:`FramePlan.digests`), computed before the
+    scene was loaded; by default :func:`.digest.frame_digest` now, which is right only if
+    no input file can have changed since the scene was loaded."""
     if film.nonfinite_samples:
         logging.getLogger("relray").warning("frame %d: %d non-finite samples dropped", frame,
                                             film.nonfinite_samples)
