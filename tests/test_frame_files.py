@@ -272,6 +272,10 @@ def test_a_changed_renderer_makes_every_frame_stale(rendered: Path, monkeypatch,
                                                     what: str) -> None:
     """The renderer's identity covers every core source file (a superset of the numba
     kernel cache's kernel_source_digest) and the libraries that compute pixels."""
+    identity = digest.renderer_identity()
+    assert digest.library_versions() in identity
+    assert all(f"{name}=" in identity for name in ("numpy", "numba", "llvmlite", "embreex",
+                                                   "OpenImageIO", "trimesh"))
     if what == "kernel source":
         monkeypatch.setattr(digest, "source_digest", lambda folder: "0" * 40)
     else:

@@ -56,6 +56,7 @@ def names_job(tmp_path: Path, name: str, frames: str = "[1, 3]") -> jobmod.Job:
     ("/abs/{frame}", "[1, 1]", "path separator"),
     ("{frame:c}etc", "[47, 47]", "path separator"),      # chr(47) is '/'
     ("..", "[1, 1]", "folder reference"),
+    (".", "[1, 1]", "folder reference"),
     ("{frame:.>2}", "[1, 1]", "starts with a dot"),     # '.1': hidden
     (".f{frame}.tmp-h-1-0123abcd", "[1, 1]", "starts with a dot"),  # a temporary's name
     ("", "[1, 1]", "empty"),
@@ -89,6 +90,15 @@ def test_every_frame_name_is_checked_before_rendering(tmp_path, name, frames, wh
     message = str(err.value)
     assert len(message.splitlines()) == 1 and len(message) < 400 and message.isprintable()
     assert not (tmp_path / "out").exists()  # nothing rendered, nothing written
+
+
+def test_names_equal_after_unicode_normalisation_clash(tmp_path: Path) -> None:
+    """macOS stores names normalised: the Angstrom sign and Å, the Kelvin sign and K,
+    are one file there (and K/k one file on Windows)."""
+    job = names_job(tmp_path, "{frame:c}", "[1, 1]")
+    for a, b in [(0xC5, 0x212B), (ord("K"), 0x212A), (ord("k"), 0x212A)]:
+        with pytest.raises(UserError, match=f"frames {a} and {b} would both be written"):
+            frame_files.check_frame_names(job, [a, b])
 
 
 def test_the_job_file_refuses_a_huge_width_without_building_it(tmp_path: Path) -> None:
