@@ -71,6 +71,7 @@ def names_job(tmp_path: Path, name: str, frames: str = "[1, 3]") -> jobmod.Job:
     ("{frame:d}" + "x" * 200, "[1, 1]", "byte file name"),
     ("{frame}" + "é" * 110, "[1, 1]", "byte file name"),   # bytes, not characters
     ("{frame:>250}", "[1, 1]", "byte file name"),
+    ("{frame:\U0002ebe1<{frame}}", "[49, 49]", "byte file name"),  # the message stays short
     ("{frame:>999999999}", "[1, 1]", "more than 255"),     # refused before it is built
     ("{frame:>{frame}}", "[256, 257]", "more than 255"),
     ("{frame:.999f}", "[1, 1]", "more than 255"),

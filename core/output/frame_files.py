@@ -47,8 +47,9 @@ _INVISIBLE = {"Cc": "a control character", "Cf": "an invisible formatting charac
 """Unicode categories refused in names: controls (C0 and C1), bidirectional overrides and
 zero-width characters (a name that displays as another), what UTF-8 cannot encode and
 what splits a line."""
-SHOWN_NAME_CHARS = 60
-"""A name quoted in an error message is cut to this many characters."""
+SHOWN_NAME_CHARS = 80
+"""A name quoted in an error message is cut to about this many characters (escapes
+included: an unprintable character counts as its escape, up to 10)."""
 
 
 def frame_stem(job: Job, frame: int) -> str:
@@ -60,9 +61,13 @@ def frame_stem(job: Job, frame: int) -> str:
 def shown(name: str) -> str:
     """``name`` quoted for a one-line message (``repr``: what does not print is
     escaped), cut when long."""
-    if len(name) <= SHOWN_NAME_CHARS:
-        return repr(name)
-    return repr(name[:SHOWN_NAME_CHARS])[:-1] + f"...' ({len(name)} characters)"
+    if len(text := repr(name)) <= SHOWN_NAME_CHARS:
+        return text
+    keep = 0
+    while len(repr(name[:keep + 1])) <= SHOWN_NAME_CHARS:
+        keep += 1
+    text = repr(name[:keep])
+    return f"{text[:-1]}...{text[-1]} ({len(name)} characters)"
 
 
 def frame_file_names(stem: str) -> list[str]:
