@@ -256,6 +256,16 @@ def test_a_changed_gltf_makes_every_frame_stale(tmp_path: Path, how: str) -> Non
     assert_all_stale(path)
 
 
+def test_the_digest_covers_every_input_file(tmp_path: Path) -> None:
+    """digest.input_files lists what the digest hashes: the mesh, the include, a glTF
+    scene file and its external buffer; not the job file or the output folder."""
+    gltf_scene(tmp_path, "s.gltf")
+    path = setup(tmp_path, JOB.replace("include = ", 'file = "s.gltf"\ninclude = '))
+    files = digest.input_files(jobmod.load_job(path))
+    assert sorted(p.name for p in files) == ["b.bin", "inc.toml", "m.obj", "s.gltf"]
+    assert all(p.is_absolute() for p in files)
+
+
 def test_a_new_renderer_version_makes_every_frame_stale(rendered: Path, monkeypatch) -> None:
     monkeypatch.setattr(digest, "__version__", "0.1.1")
     digest.renderer_identity.cache_clear()

@@ -83,6 +83,34 @@ def canonical(value: Any) -> Any:
     raise TypeError(f"no canonical form for {type(value).__name__}")
 
 
+def input_files(job: Job) -> list[Path]:
+    """Every file whose content :func:`job_digest` covers, in the order it hashes them:
+    each path in the job (``scene.file``, mesh ``file`` parameters, ``scene.includes``,
+    nested includes flattened by the parser) and, after a glTF, its external buffers
+    (:func:`..scene.gltf.external_files`; images are not read: textures are ignored)."""
+    found: list[Path] = []
+
+    def walk(value: Any) -> None:
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            name = type(value).__name__
+            for f in dataclasses.fields(value):
+                if (name, f.name) not in IGNORED:
+                    walk(getattr(value, f.name))
+        elif isinstance(value, Path):
+            found.append(value)
+            if value.suffix.lower() in (".gltf", ".glb"):
+                found.extend(gltf.external_files(value))
+        elif isinstance(value, list | tuple):
+            for v in value:
+                walk(v)
+        elif isinstance(value, dict):
+            for _, v in sorted(value.items(), key=lambda kv: str(kv[0])):
+                walk(v)
+
+    walk(job)
+    return found
+
+
 def file_digest(path: Path) -> str:
     """SHA-256 of a file's bytes (for glTF, also of its external buffers); "missing" if
     it cannot be read.
