@@ -7,9 +7,9 @@ Packages follow the data flow, and each imports only those before it (the layeri
     files                      reading input files: regular files only, bounded, no hang
     resources                  memory limit (physical, cgroup, rlimit), thread cap
     physics/    relativity, spectrum, sigmoid, cie_tables
-    scene/      description ◄── job (TOML), gltf, shapes;  geometry, motion, footprint
+    scene/      description ◄── job (TOML), gltf, shapes;  geometry, motion, footprint, names
     render/     camera, accel, sampling, bsdf, lights, materials, integrator, film, frames
-    output/     imageio, frame_files (names, metadata, resume), contact
+    output/     imageio, digest, frame_files (names, metadata, resume), contact
     progress    tqdm bar, JSON lines (the subprocess contract)
     runner      a job's frames in this process
     farm        a job's frames on Dask

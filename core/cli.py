@@ -246,7 +246,7 @@ def cmd_render(args: argparse.Namespace) -> int:
 def cmd_info(args: argparse.Namespace) -> int:
     job = load_with_overrides(args)
     events = frame_events(job)
-    check_frame_names(job, [frame for frame, _ in events])
+    check_frame_names(job)
     print(jobmod.job_summary(job))
     cam = camera_settings(job)
     pin = PinholeCamera.from_settings(cam, job.render.width, job.render.height)

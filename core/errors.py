@@ -29,10 +29,12 @@ class UserError(Exception):
         return one_line(f"{prefix}: {self.detail}" if prefix else self.detail)
 
 
-_CONTROL = {c: f"\\x{c:02x}" for c in (*range(32), 127)} | {10: "\\n", 13: "\\r", 9: "\\t"}
+_CONTROL = ({c: f"\\x{c:02x}" for c in (*range(32), *range(127, 160))}
+            | {10: "\\n", 13: "\\r", 9: "\\t", 0x2028: "\\u2028", 0x2029: "\\u2029"})
 
 
 def one_line(text: str) -> str:
-    """``text`` with control characters (newlines in a file name or a quoted value)
-    escaped, so that a message is always exactly one line."""
+    """``text`` with control characters (C0, DEL and C1: newlines in a file name or a
+    quoted value, NEL) and the Unicode line and paragraph separators escaped, so that a
+    message is always exactly one line (also for ``str.splitlines``)."""
     return text.translate(_CONTROL)

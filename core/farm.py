@@ -88,7 +88,13 @@ from typing import Any
 from . import user_cache_dir
 from .errors import UserError
 from .output.digest import frame_digest, job_digest
-from .output.frame_files import frame_is_done, plan_frames, write_film
+from .output.frame_files import (
+    check_frame_names,
+    frame_is_done,
+    frame_stem,
+    plan_frames,
+    write_film,
+)
 from .output.imageio import frame_paths
 from .physics.relativity import ShutterEvent
 from .physics.spectrum import sensor_to_rgb
@@ -238,7 +244,7 @@ def worker_renderer(job: Job, run_id: str, threads: int) -> FrameRenderer:
 
 
 def _frame_files(job: Job, frame: int) -> list[str]:
-    paths = frame_paths(job.output.dir, job.output.name.format(frame=frame))
+    paths = frame_paths(job.output.dir, frame_stem(job, frame))
     return [str(paths[f]) for f in job.output.formats]
 
 
@@ -528,6 +534,7 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
     slots = host_slots(client)
     frame, ev = todo
     t0 = time.perf_counter()
+    digest = frame_digest(job, frame, ev)  # before any worker loads the input files
     index: dict[str, int] = {}
     futures = []
     for k, r in enumerate(ranges):
@@ -574,7 +581,7 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
         raise
     seconds = time.perf_counter() - t0
     paths = write_film(job, frame, ev, merged, sensor_to_rgb(job.render.spectral), seconds,
-                       (d_min, d_max))
+                       (d_min, d_max), digest)
     result.written += paths
     result.rendered.append(frame)
     reporter.frame_done(frame, paths, seconds, (d_min, d_max))
@@ -591,6 +598,7 @@ def render(job: Job, *, scheduler: str | None = None, workers: int = 0,
     """
     reporter = reporter if reporter is not None else Reporter()
     t0 = time.perf_counter()
+    check_frame_names(job)  # a bad name is one line before any cluster starts
     with dask_client(scheduler, workers, connect_timeout, job.path) as client:
         n_workers = len(client.scheduler_info().get("workers", {})) if scheduler else workers
         result = render_on_dask(job, client, overwrite=overwrite, reporter=reporter,

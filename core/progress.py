@@ -10,7 +10,8 @@ event         fields
 ============  ==========================================================================
 start         version, job, out, mode ("local" | "dask"), scheduler, workers,
               frames [first, last], done, to_render, stale (of to_render: changed
-              since they were rendered), todo [frames], unit, units
+              since they were rendered), stale_reasons {reason: count} (reasons:
+              "job", "renderer", "no digest"), todo [frames], unit, units
 progress      fraction (0..1), frames_done, frames_total, elapsed, eta_seconds (or null)
 frame_done    frame, path (the EXR, else the first file), paths, seconds, fraction,
               frames_done, frames_total
@@ -39,7 +40,7 @@ from typing import Any, TextIO
 from tqdm import tqdm
 
 from .. import __version__
-from .output.frame_files import FramePlan
+from .output.frame_files import STALE_REASONS, FramePlan
 from .scene.description import Job
 
 PROGRESS_INTERVAL_S = 0.5
@@ -125,8 +126,16 @@ class Reporter:
 
 
 def plan_message(plan: FramePlan, out_dir: Path) -> str:
-    """"relray: N done, M to render (K changed since they were rendered) -> DIR"."""
-    stale = f" ({plan.stale} changed since they were rendered)" if plan.stale else ""
+    """"relray: N done, M to render (K changed since they were rendered: WHY) -> DIR",
+    WHY from :data:`.output.frame_files.STALE_REASONS` (with counts when they differ)."""
+    stale = ""
+    if plan.stale:
+        reasons = plan.stale_reasons or {}
+        if len(reasons) == 1:
+            why = ": " + STALE_REASONS.get(next(iter(reasons)), next(iter(reasons)))
+        else:
+            why = ": " + "; ".join(f"{n} {STALE_REASONS.get(r, r)}" for r, n in reasons.items())
+        stale = f" ({plan.stale} changed since they were rendered{why if reasons else ''})"
     return f"relray: {plan.done} done, {len(plan.todo)} to render{stale} -> {out_dir}"
 
 
@@ -194,6 +203,7 @@ class JsonReporter(Reporter):
         self.emit("start", version=__version__, job=str(job.path), out=str(job.output.dir),
                   mode=mode, scheduler=scheduler, workers=workers, frames=[first, last],
                   done=plan.done, to_render=len(plan.todo), stale=plan.stale,
+                  stale_reasons=dict(plan.stale_reasons),
                   todo=[f for f, _ in plan.todo],
                   unit=unit, units=self.units, message=plan_message(plan, job.output.dir))
 

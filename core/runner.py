@@ -30,9 +30,9 @@ def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,
     """
     reporter = reporter if reporter is not None else default_reporter(show_progress)
     t0 = time.perf_counter()
+    plan = plan_frames(job, overwrite)  # digests of the input files before they are loaded
     scene = build_scene(job)
     resolve_camera(job, scene)
-    plan = plan_frames(job, overwrite)
     s = job.render
     reporter.start(job, plan, mode="local", units=len(plan.todo) * s.width * s.height * s.spp,
                    unit="path")
@@ -42,7 +42,7 @@ def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,
         for frame, ev in plan.todo:
             film, stats = renderer.render(ev, frame, progress=reporter.advance, cancel=cancel)
             paths = write_film(job, frame, ev, film, renderer.to_rgb, stats.seconds,
-                               (stats.d_min, stats.d_max))
+                               (stats.d_min, stats.d_max), plan.digests[frame])
             written += paths
             reporter.frame_done(frame, paths, stats.seconds, (stats.d_min, stats.d_max))
     reporter.finish("ok", time.perf_counter() - t0)

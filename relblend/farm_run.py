@@ -20,14 +20,15 @@ piece                  does
                        done (exit 0) | failed (1: frames named) | error (2: the user
                        error line; a crash: the end of stderr) | cancelled (130);
                        "cancelling" in between after a cancel
-:func:`export_digest`  a hash of the exported files: a rerun of an unchanged export
-                       resumes, a changed scene renders every frame again
 =====================  ======================================================================
+
+Resume is the core's: ``relray render`` skips each frame whose files record the digest
+of the job and input files as exported now (``core.output.frame_files.plan_frames``),
+so the add-on never decides itself which frames are stale.
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
 import queue
 import signal
@@ -314,18 +315,5 @@ def start_render(job_path: str | Path, scheduler: str = "", overwrite: bool = Fa
     return FarmRun(argv, child_env, cwd=Path(job_path).parent).start()
 
 
-def export_digest(directory: str | Path) -> str | None:
-    """A hash of an export's job, glTF and PLY files (None when there is no job yet)."""
-    root = Path(directory)
-    if not (root / "job.toml").is_file():
-        return None
-    h = hashlib.blake2b(digest_size=16)
-    for path in [root / "job.toml", root / "scene.glb", *sorted(root.glob("meshes/*.ply"))]:
-        if path.is_file():
-            h.update(path.name.encode() + b"\0")
-            h.update(path.read_bytes())
-    return h.hexdigest()
-
-
-__all__ = ["CANCEL_GRACE_S", "FarmRun", "FarmRunError", "Progress", "export_digest",
-           "has_dask", "render_command", "start_render"]
+__all__ = ["CANCEL_GRACE_S", "FarmRun", "FarmRunError", "Progress", "has_dask",
+           "render_command", "start_render"]

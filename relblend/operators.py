@@ -184,16 +184,15 @@ def start_farm_render(context, directory: str | Path, scheduler: str = "",
                       env: dict[str, str] | None = None) -> tuple["FarmRun", "FarmExport"]:
     """Export the scene's job into ``directory`` and launch ``relray render`` on it.
 
-    Returns (the :class:`.farm_run.FarmRun`, the :class:`.farm.FarmExport`). An export
-    whose files changed since the last one renders every frame again; an unchanged one
-    resumes (a cancelled run continues where it stopped).
+    Returns (the :class:`.farm_run.FarmRun`, the :class:`.farm.FarmExport`). Resume is
+    the core's (``relray render`` compares each frame's recorded digest): frames the
+    changed scene would draw differently render again, the others (a cancelled run's,
+    an unchanged export's, those of an extended frame range) are kept.
     """
     from .farm import export_farm
-    from .farm_run import export_digest, start_render
+    from .farm_run import start_render
 
-    before = export_digest(directory)
     result = export_farm(context, directory)
-    overwrite = overwrite or export_digest(directory) != before
     run = start_render(result.job_path, scheduler, overwrite, connect_timeout, env)
     _FARM_RUNS[:] = [run]
     return run, result
@@ -225,7 +224,8 @@ class RELRAY_OT_render_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
 
     overwrite: BoolProperty(
         name="Overwrite", default=False,
-        description="Render every frame again (a rerun of an unchanged export resumes)")
+        description="Render every frame again (otherwise only frames whose scene, settings "
+                    "or renderer changed, and missing ones, are rendered)")
 
     @classmethod
     def poll(cls, context):

@@ -10,12 +10,18 @@ changed job never serves stale frames. The digest covers:
 - the *content* of every input file the job names, not its name: the glTF scene and
   its external buffers, mesh files, TOML includes (:func:`file_digest`);
 - the frame: its number and shutter event (lab time, position, β, proper time);
-- the renderer: its version and a digest of the core's source (:func:`renderer_identity`),
-  so an update that may change pixels re-renders.
+  the ``[motion]`` table reaches the pixels only through these events (the renderer is
+  handed the event, never the table: ``tests/test_frame_files.py`` checks), so it is
+  left out of the job's part: a frame is stale when *its* event moved, and extending
+  an animation or editing a later keyframe keeps the frames it does not move;
+- the renderer: its version, a digest of the core's source and the versions of the
+  libraries it renders with (:func:`renderer_identity`), so an update that may change
+  pixels re-renders.
 
 What does not change pixels is left out: the job file's own path, ``render.threads``,
 the output folder and name template (the files' own location), the ``--frames``
-selection (:data:`IGNORED`), and the progress and quiet flags, which are not in the job.
+selection and the animation's range (:data:`IGNORED`), and the progress and quiet
+flags, which are not in the job.
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
+import importlib.metadata
 import json
 import os
 from pathlib import Path
@@ -37,8 +44,9 @@ from ..scene import gltf
 from ..scene.description import Job
 
 IGNORED = {("Job", "path"), ("RenderSettings", "threads"), ("OutputSettings", "dir"),
-           ("OutputSettings", "name"), ("MotionSettings", "render_frames")}
-"""(class, field) pairs that do not change a frame's pixels."""
+           ("OutputSettings", "name"), ("Job", "motion")}
+"""(class, field) pairs left out of :func:`job_digest`: they do not change a frame's
+pixels (``Job.motion``: only through the frame's event, in :func:`frame_digest`)."""
 METADATA_KEY = "relray:digest"
 
 
@@ -75,9 +83,43 @@ def canonical(value: Any) -> Any:
     raise TypeError(f"no canonical form for {type(value).__name__}")
 
 
+def input_files(job: Job) -> list[Path]:
+    """Every file whose content :func:`job_digest` covers, in the order it hashes them:
+    each path in the job (``scene.file``, mesh ``file`` parameters, ``scene.includes``,
+    nested includes flattened by the parser) and, after a glTF, its external buffers
+    (:func:`..scene.gltf.external_files`; images are not read: textures are ignored)."""
+    found: list[Path] = []
+
+    def walk(value: Any) -> None:
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            name = type(value).__name__
+            for f in dataclasses.fields(value):
+                if (name, f.name) not in IGNORED:
+                    walk(getattr(value, f.name))
+        elif isinstance(value, Path):
+            found.append(value)
+            if value.suffix.lower() in (".gltf", ".glb"):
+                found.extend(gltf.external_files(value))
+        elif isinstance(value, list | tuple):
+            for v in value:
+                walk(v)
+        elif isinstance(value, dict):
+            for _, v in sorted(value.items(), key=lambda kv: str(kv[0])):
+                walk(v)
+
+    walk(job)
+    return found
+
+
 def file_digest(path: Path) -> str:
     """SHA-256 of a file's bytes (for glTF, also of its external buffers); "missing" if
-    it cannot be read. Each file's hash is cached per (path, size, modification time)."""
+    it cannot be read.
+
+    Each file's hash is cached per (path, device, inode, size, modification and change
+    time): a long-lived process (Blender, a farm client) hashes a large input once,
+    and still sees a rewrite that keeps the size and restores the modification time
+    (``touch -r``, ``rsync -t``, a copy within one timestamp tick), because any write
+    or rename moves the change time, which no user call can set back."""
     own = _content_digest(path)
     if Path(path).suffix.lower() not in (".gltf", ".glb") or own == "missing":
         return own
@@ -90,11 +132,13 @@ def _content_digest(path: Path) -> str:
         st = os.stat(path)
     except (OSError, ValueError):
         return "missing"
-    return _cached_content_digest(str(path), st.st_size, st.st_mtime_ns)
+    return _cached_content_digest(str(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
+                                  st.st_ctime_ns)
 
 
 @functools.lru_cache(maxsize=256)
-def _cached_content_digest(path: str, size: int, mtime_ns: int) -> str:
+def _cached_content_digest(path: str, dev: int, ino: int, size: int, mtime_ns: int,
+                           ctime_ns: int) -> str:
     if not is_regular_file(Path(path)):
         return "missing"
     h = hashlib.sha256()
@@ -107,15 +151,42 @@ def _cached_content_digest(path: str, size: int, mtime_ns: int) -> str:
     return h.hexdigest()
 
 
+PIXEL_LIBRARIES = ("numpy", "numba", "llvmlite", "embreex", "OpenImageIO", "trimesh")
+"""Libraries whose version can change a frame's pixels or files (arithmetic, compiled
+kernels, ray intersection, image encoding, mesh loading)."""
+
+
+def source_digest(folder: str | Path) -> str:
+    """SHA-1 over the path (relative to ``folder``) and bytes of every module under
+    ``folder``, in path order: every source file, not only those with kernels
+    (:func:`relray.core.kernel_source_digest`), since the film, camera and spectra
+    change pixels too."""
+    root = Path(folder)
+    h = hashlib.sha1()
+    for path in sorted(root.rglob("*.py")):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        h.update(hashlib.sha1(path.read_bytes()).digest())
+    return h.hexdigest()
+
+
+def library_versions() -> str:
+    """``name=version`` of each of :data:`PIXEL_LIBRARIES` ("none" when not installed)."""
+    out = []
+    for name in PIXEL_LIBRARIES:
+        try:
+            out.append(f"{name}={importlib.metadata.version(name)}")
+        except importlib.metadata.PackageNotFoundError:
+            out.append(f"{name}=none")
+    return ",".join(out)
+
+
 @functools.lru_cache(maxsize=1)
 def renderer_identity() -> str:
-    """``<version>+<sha1 of every core source file>``: what rendered the pixels."""
+    """What renders the pixels: ``<version>+<source digest, 16 hex>`` of relray's core
+    (:func:`source_digest`) followed by the :func:`library_versions`, so that an update of
+    relray or of a library it renders with makes every frame stale."""
     core = Path(__file__).resolve().parents[1]
-    h = hashlib.sha1()
-    for path in sorted(core.rglob("*.py")):
-        h.update(path.relative_to(core).as_posix().encode())
-        h.update(path.read_bytes())
-    return f"{__version__}+{h.hexdigest()[:16]}"
+    return f"{__version__}+{source_digest(core)[:16]} {library_versions()}"
 
 
 def job_digest(job: Job) -> str:

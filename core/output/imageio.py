@@ -473,6 +473,21 @@ def read_exr(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     return channels, metadata
 
 
+def read_metadata(path: Path) -> dict[str, str]:
+    """The metadata of an image (name -> text, header only); {} if it cannot be read."""
+    try:
+        inp = oiio.ImageInput.open(str(path))
+        if inp is None:
+            oiio.geterror()
+            return {}
+        try:
+            return {a.name: _attr_str(a.value) for a in inp.spec().extra_attribs}
+        finally:
+            inp.close()
+    except Exception:
+        return {}
+
+
 def frame_complete(
     path: Path, expected: Mapping[str, object] | None = None, verify_pixels: bool = True
 ) -> bool:

@@ -4,8 +4,8 @@ Owns the scene description (:mod:`.description`, the in-memory contract the TOML
 the glTF importer and the Blender exporter produce), the TOML job file and its
 validation (:mod:`.job`), glTF 2.0 import (:mod:`.gltf`), built-in shapes
 (:mod:`.shapes`), the flat triangle soup the renderer consumes (:mod:`.geometry`), the
-camera's path through an animation (:mod:`.motion`) and the job's peak memory
-(:mod:`.footprint`).
+camera's path through an animation (:mod:`.motion`), the job's peak memory
+(:mod:`.footprint`) and the frame-name template formatted safely (:mod:`.names`).
 
 May import: :mod:`relray.core.physics`, :mod:`relray.core.errors`,
 :mod:`relray.core.files`, :mod:`relray.core.resources`.

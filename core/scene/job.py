@@ -130,6 +130,7 @@ from .description import (
     frozen,
 )
 from .footprint import check_memory
+from .names import format_frame_name
 
 MESH_SUFFIXES = (".ply", ".obj", ".stl", ".glb", ".gltf")
 GLTF_SUFFIXES = (".glb", ".gltf")
@@ -453,7 +454,7 @@ def _check_name_template(name: str, frames: tuple[int, int], ctx: _Ctx, key: str
     """The template's syntax (it may only use {frame}). Every frame's resulting name is
     checked before rendering by :func:`..output.frame_files.check_frame_names`."""
     try:
-        name.format(frame=frames[0])
+        format_frame_name(name, frames[0])
     except (KeyError, IndexError, ValueError, AttributeError, TypeError) as e:
         raise ctx.error(
             key, f"'{name}' is not a valid name template (it may only use {{frame}}): {e!r}"

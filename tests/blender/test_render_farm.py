@@ -208,6 +208,8 @@ def test_farm_run_exit_codes(ext, tmp_path):
 
 
 def test_changed_export_renders_again_unchanged_resumes(cli, tmp_path):
+    """The add-on leaves resume to the core's digest: a changed scene renders every frame
+    again, an unchanged one or a longer frame range keeps the finished frames."""
     scene = tiny_cornell(frames=2)
     ops = ext_module("relblend.operators")
     run, result = ops.start_farm_render(bpy.context, tmp_path)
@@ -216,11 +218,17 @@ def test_changed_export_renders_again_unchanged_resumes(cli, tmp_path):
     run, _ = ops.start_farm_render(bpy.context, tmp_path)  # unchanged: resume
     drive(run)
     assert (run.progress.done_before, run.progress.frames_total) == (2, 0)
-    scene.relray.seed = 8  # changed: every frame again
+    scene.frame_end = 3  # one more frame: only that one
     run, _ = ops.start_farm_render(bpy.context, tmp_path)
-    assert "--overwrite" in run.argv
     drive(run)
-    assert run.progress.state == "done" and run.progress.frames_done == 2
+    assert (run.progress.done_before, run.progress.frames_total) == (2, 1), \
+        list(run.progress.stderr)
+    scene.relray.seed = 8  # changed: every frame again, without --overwrite
+    run, _ = ops.start_farm_render(bpy.context, tmp_path)
+    assert "--overwrite" not in run.argv
+    drive(run)
+    assert run.progress.state == "done"
+    assert (run.progress.done_before, run.progress.frames_done) == (0, 3)
 
 
 def test_render_farm_operator_execute(cli, tmp_path):
