@@ -50,7 +50,7 @@ from pathlib import Path
 from typing import Annotated, Any, ClassVar, Literal, Union, get_args, get_origin
 
 import numpy as np
-from annotated_types import Ge, Gt, Le, Lt
+from annotated_types import Ge, Gt, Le, Lt, MaxLen, MinLen
 from pydantic import (
     AfterValidator,
     BaseModel,
@@ -827,7 +827,8 @@ def _message(err: Mapping[str, Any], w: _Where) -> tuple[str, str]:
     if kind in _BOUNDS:
         relation, name = _BOUNDS[kind]
         bound = ctx.get(name)
-        if isinstance(bound, float) and abs(bound) == MAX_ABS_NUMBER:
+        beyond = w.node is float and isinstance(value, int | float) and abs(value) > MAX_ABS_NUMBER
+        if beyond or (isinstance(bound, float) and abs(bound) == MAX_ABS_NUMBER):
             return key, (f"{_fmt_num(value)} is out of range: numbers must lie within "
                          f"±{MAX_ABS_NUMBER:g} (relray computes in float32){at}")
         return key, f"must be {relation} {_fmt_num(bound)} (got {_fmt_num(value)}){at}"
@@ -846,6 +847,23 @@ def _message(err: Mapping[str, Any], w: _Where) -> tuple[str, str]:
     if kind == "invalid_key":
         return key, f"unknown key {value!r} (keys must be strings)"
     return key, f"{err['msg']}{at}"
+
+
+def _wrong_length(data: Any, w: _Where) -> tuple[str, str] | None:
+    """For an error inside an array of numbers of fixed length (a vector, a matrix): the
+    array's own length, when that is wrong, is the better message."""
+    if not w.items:
+        return None
+    lo = next((m.min_length for m in w.meta if isinstance(m, MinLen)), None)
+    hi = next((m.max_length for m in w.meta if isinstance(m, MaxLen)), None)
+    try:
+        for k in w.path[:len(w.path) - len(w.items)]:
+            data = data[k]
+    except (KeyError, IndexError, TypeError):
+        return None
+    if lo is None or hi is None or lo != hi or not isinstance(data, list) or len(data) == lo:
+        return None
+    return w.key, f"must be {_expect(w.meta) or 'an array'}, not {len(data)} values"
 
 
 _SECTION_ORDER = ("render", "motion", "output", "scene", "materials", "objects", "lights",
@@ -911,7 +929,7 @@ def validate(model: Any, data: Any, file: str | Path | None, prefix: str = "",
                 continue
         err = _first(errors)
         w = _resolve(model, err["loc"], prefix)
-        key, message = _message(err, w)
+        key, message = _wrong_length(data, w) or _message(err, w)
         if keys and key in keys:
             key = keys[key]
         raise UserError(message, key=key or None, file=file)
