@@ -42,6 +42,7 @@ import functools
 import json
 import math
 import operator
+import re
 import sys
 import types
 from collections.abc import Callable, Mapping, Sequence
@@ -962,11 +963,30 @@ def _tidy(node: Any) -> Any:
     return node
 
 
+def _tagged(node: Any) -> Any:
+    """pydantic's ``oneOf`` + ``discriminator`` (an OpenAPI keyword validators ignore) as
+    ``if``/``then`` per tag: editors then report the wrong key of a box, not "valid under
+    none of the schemas"."""
+    if isinstance(node, list):
+        return [_tagged(v) for v in node]
+    if not isinstance(node, dict):
+        return node
+    node = {k: _tagged(v) for k, v in node.items()}
+    disc = node.get("discriminator")
+    if isinstance(disc, dict) and "oneOf" in node:
+        tag, mapping = disc["propertyName"], disc["mapping"]
+        node = {"type": "object", "required": [tag],
+                "properties": {tag: {"enum": list(mapping)}},
+                "allOf": [{"if": {"properties": {tag: {"const": t}}, "required": [tag]},
+                           "then": {"$ref": ref}} for t, ref in mapping.items()]}
+    return node
+
+
 def json_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of a job file."""
-    schema = _tidy(JobFile.model_json_schema())
+    schema = _tagged(_tidy(JobFile.model_json_schema()))
     return {"$schema": "https://json-schema.org/draft/2020-12/schema",
-            "$id": "https://relray.invalid/job.schema.json", **schema}
+            **schema}
 
 
 def json_text() -> str:
@@ -992,17 +1012,21 @@ def _toml(value: Any) -> str:
     return str(value)
 
 
+def _doc_num(x: float) -> str:
+    return str(x) if isinstance(x, int) else f"{x:g}"
+
+
 def _bounds(meta: list[Any]) -> str:
     lo = hi = ""
     for m in meta:
         if isinstance(m, Ge) and m.ge != -MAX_ABS_NUMBER:
-            lo = f"≥ {_fmt_num(m.ge)}"
+            lo = f"≥ {_doc_num(m.ge)}"
         elif isinstance(m, Gt):
-            lo = f"> {_fmt_num(m.gt)}"
+            lo = f"> {_doc_num(m.gt)}"
         elif isinstance(m, Le) and m.le != MAX_ABS_NUMBER:
-            hi = f"≤ {_fmt_num(m.le)}"
+            hi = f"≤ {_doc_num(m.le)}"
         elif isinstance(m, Lt):
-            hi = f"< {_fmt_num(m.lt)}"
+            hi = f"< {_doc_num(m.lt)}"
     return ", ".join(b for b in (lo, hi) if b)
 
 
@@ -1076,7 +1100,9 @@ def markdown() -> str:
     sections += [(f"[[lights]] type = \"{t}\"", m, tuple(Light.model_fields))
                  for t, m in LIGHT_MODELS.items()]
     for title, model, skip in sections:
-        doc = (model.__doc__ or "").strip().splitlines()[0]
+        doc = (model.__doc__ or "").strip().splitlines()[0].replace("``", "`")
+        doc = re.sub(r"^`[^`]*`: ", "", doc)
+        doc = doc[:1].upper() + doc[1:]
         out += ["", f"## `{title}`", "", doc, ""]
         if model in (Object, Light):
             field = "shape" if model is Object else "type"
@@ -1121,9 +1147,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     parser = argparse.ArgumentParser(prog="python -m relray.core.scene.schema",
                                      description="Print the job file's reference or schema.")
-    parser.add_argument("what", choices=("--markdown", "--json"))
+    what = parser.add_mutually_exclusive_group(required=True)
+    what.add_argument("--markdown", action="store_true", help="docs/job-reference.md")
+    what.add_argument("--json", action="store_true", help="docs/job.schema.json")
     args = parser.parse_args(argv)
-    sys.stdout.write(markdown() if args.what == "--markdown" else json_text())
+    sys.stdout.write(markdown() if args.markdown else json_text())
     return 0
 
 
