@@ -38,6 +38,7 @@ from .render.camera import PinholeCamera, lab_rays
 from .render.frames import RenderCancelled
 from .runner import render_job
 from .scene import job as jobmod
+from .scene import schema as schemamod
 from .scene.motion import camera_settings, frame_events
 
 EXIT_FRAMES_FAILED = 1
@@ -278,13 +279,11 @@ def cmd_contact_sheet(args: argparse.Namespace) -> int:
 
 
 def cmd_schema(args: argparse.Namespace) -> int:
-    from .scene import schema
-
     if args.out is None:
-        sys.stdout.write(schema.json_text())
+        sys.stdout.write(schemamod.json_text())
         return 0
     try:
-        args.out.write_text(schema.json_text(), encoding="utf-8")
+        args.out.write_text(schemamod.json_text(), encoding="utf-8")
     except OSError as e:
         raise UserError(f"cannot write: {e.strerror or e}", key="--out", file=args.out) from None
     print(args.out)

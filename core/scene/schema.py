@@ -36,6 +36,7 @@ validates in well under a millisecond either way; a job is read once per render.
 
 from __future__ import annotations
 
+import argparse
 import copy
 import difflib
 import functools
@@ -646,7 +647,7 @@ def given(model: BaseModel, name: str) -> bool:
 
 
 def _unwrap(tp: Any) -> tuple[Any, list[Any]]:
-    """``tp`` without ``Annotated`` (its metadata returned, nested FieldInfos flattened)."""
+    """``tp`` without ``Annotated``: its metadata (a FieldInfo's own metadata after it)."""
     meta: list[Any] = []
     while get_origin(tp) is Annotated:
         for m in tp.__metadata__:
@@ -683,7 +684,8 @@ class _Where:
     choices: tuple[Any, ...] = ()
 
 
-def _resolve(root: type[BaseModel], loc: Sequence[Any], prefix: str = "") -> _Where:
+def _resolve(root: Any, loc: Sequence[Any], prefix: str = "") -> _Where:
+    """Walk ``loc`` through the declared types from ``root`` (a model or a tagged union)."""
     parts: list[str] = [prefix] if prefix else []
     w = _Where("", [], None, None, root, [], [])
     tp: Any = root
@@ -728,8 +730,7 @@ def _resolve(root: type[BaseModel], loc: Sequence[Any], prefix: str = "") -> _Wh
         if get_origin(tp) is Literal:
             w.choices = get_args(tp)
     w.node = tp
-    w.key = ".".join(p for p in parts if p) if parts else ""
-    # indices were appended to the last part; a leading "[i]" without a prefix is kept
+    w.key = ".".join(p for p in parts if p)  # "[i]" of arrays of tables joins its key
     return w
 
 
@@ -1143,8 +1144,6 @@ RULES = (
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    import argparse
-
     parser = argparse.ArgumentParser(prog="python -m relray.core.scene.schema",
                                      description="Print the job file's reference or schema.")
     what = parser.add_mutually_exclusive_group(required=True)
