@@ -38,6 +38,7 @@ from .render.camera import PinholeCamera, lab_rays
 from .render.frames import RenderCancelled
 from .runner import render_job
 from .scene import job as jobmod
+from .scene import schema as schemamod
 from .scene.motion import camera_settings, frame_events
 
 EXIT_FRAMES_FAILED = 1
@@ -146,6 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("folder", type=Path)
     c.add_argument("--out", type=Path, required=True)
     c.add_argument("--columns", type=int, default=8)
+    s = sub.add_parser("schema", help="print the job file's JSON Schema (for editors: "
+                       "docs/job-format.md, \"Editor support\")")
+    s.add_argument("-o", "--out", type=Path, help="write it to this file instead")
     return p
 
 
@@ -274,6 +278,18 @@ def cmd_contact_sheet(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_schema(args: argparse.Namespace) -> int:
+    if args.out is None:
+        sys.stdout.write(schemamod.json_text())
+        return 0
+    try:
+        args.out.write_text(schemamod.json_text(), encoding="utf-8")
+    except OSError as e:
+        raise UserError(f"cannot write: {e.strerror or e}", key="--out", file=args.out) from None
+    print(args.out)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; every failure ends as one line on stderr and an exit code.
 
@@ -289,7 +305,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(join_negative_values(list(sys.argv[1:] if argv is None
                                                        else argv), parser))
-    commands = {"render": cmd_render, "info": cmd_info, "contact-sheet": cmd_contact_sheet}
+    commands = {"render": cmd_render, "info": cmd_info, "contact-sheet": cmd_contact_sheet,
+                "schema": cmd_schema}
     try:
         return commands[args.command](args)
     except UserError as e:

@@ -43,7 +43,8 @@ PYTHON_VERSION = "3.11"
 #: versions of ``requirements.lock`` (:func:`wheel_pins`), so the extension bundles exactly
 #: what the tests ran with.
 WHEEL_PACKAGES = ["numba", "llvmlite", "embreex", "colour-science", "scipy", "imageio",
-                  "pillow", "typing_extensions", "OpenImageIO", "trimesh", "tqdm"]
+                  "pillow", "typing_extensions", "OpenImageIO", "trimesh", "tqdm",
+                  "pydantic", "pydantic-core", "annotated-types", "typing-inspection"]
 LOCK = ROOT / "requirements.lock"
 
 

@@ -25,29 +25,5 @@ def test_readme_names_the_commands_and_images():
         assert image in text and (ROOT / image).is_file()
 
 
-def _job_reference():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("job_reference",
-                                                  ROOT / "docs" / "job_reference.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_job_reference_lists_every_accepted_key(monkeypatch):
-    """docs/job-reference.md is generated from the validator's key tables and the
-    docstring tables; every key the validator accepts is documented there."""
-    ref = _job_reference()
-    assert ref.missing_keys() == []
-    assert (ROOT / "docs" / "job-reference.md").read_text() == ref.render(), \
-        "docs/job-reference.md is out of date: run .venv/bin/python docs/job_reference.py"
-    for key in ("scene.include", "render.transparent", "camera.shift",
-                "materials.one_sided_emission", "lights (area).up"):
-        section, _, name = key.rpartition(".")
-        assert name in ref.job.accepted_keys()[section]
-    from relray.core.scene import job
-
-    real = job.accepted_keys
-    monkeypatch.setattr(job, "accepted_keys", lambda: {**real(), "render": ("undocumented",)})
-    assert ref.missing_keys() == ["render.undocumented"]  # the check can fail
+# docs/job-reference.md and docs/job.schema.json: tests/test_schema.py (generated from
+# core/scene/schema.py, checked to be current there).
