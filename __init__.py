@@ -14,27 +14,37 @@ _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP", "SIGBREAK")
 def cli_main() -> int:
     """The ``relray`` command (console script and ``python -m relray``).
 
-    Installs its signal handlers before anything heavy is imported: SIGINT, SIGTERM or
-    SIGHUP during start-up (numpy, numba and Embree take a second or more to load) or
-    during the run ends the command with "relray: interrupted" and exit code 130, and
-    one arriving after the command has finished is ignored, so the process never dies
-    by the signal. Everything else is :func:`relray.core.cli.main`.
+    Installs its signal handlers before anything heavy is imported. SIGINT, SIGTERM or
+    SIGHUP during start-up (numpy, numba, OpenImageIO and Embree take a second or more to
+    load) is held until the imports are done, because an exception raised inside an
+    extension module's initialisation turns into an ImportError traceback, or leaves
+    CPython's "unhandled KeyboardInterrupt" mark that makes it kill itself by SIGINT at
+    exit; the command then ends with "relray: interrupted" and exit code 130. During the
+    run the signal interrupts (130 again). Once the command has finished the signals are
+    ignored (SIG_IGN, which the interpreter's finalisation keeps), so the process never
+    dies by one. Everything else is :func:`relray.core.cli.main`.
     """
     import signal
     import sys
 
-    finished = False
+    phase = "start-up"
+    held: list[int] = []
 
     def on_signal(signum, frame):
-        if not finished:
+        if phase == "start-up":
+            held.append(signum)
+        elif phase == "run":
             raise KeyboardInterrupt
 
-    for name in _STOP_SIGNALS:
-        if hasattr(signal, name):
-            signal.signal(getattr(signal, name), on_signal)
+    stop_signals = [getattr(signal, n) for n in _STOP_SIGNALS if hasattr(signal, n)]
+    for sig in stop_signals:
+        signal.signal(sig, on_signal)
     try:
         from .core import cli
 
+        phase = "run"
+        if held:
+            raise KeyboardInterrupt
         code = cli.main()
     except KeyboardInterrupt:
         code = 130
@@ -42,7 +52,9 @@ def cli_main() -> int:
             print("relray: interrupted", file=sys.stderr)
         except KeyboardInterrupt:
             pass
-    finished = True
+    phase = "finished"
+    for sig in stop_signals:
+        signal.signal(sig, signal.SIG_IGN)
     return code
 
 
