@@ -592,7 +592,7 @@ class SunLight(Light):
 class AreaLight(Light):
     """A rectangular area light."""
 
-    what: ClassVar[str] = "for a area light"
+    what: ClassVar[str] = "for an area light"
     type: Literal["area"]
     direction: Direction = _DIRECTION
     color: Colour = _COLOR
