@@ -28,7 +28,9 @@ APT_PACKAGES="blender python3-numpy python3-pytest python3-scipy python3-pil pyt
 # The extension's bundled packages (relblend/packaging.py's WHEEL_PACKAGES) as cp313
 # manylinux wheels from PyPI, the same versions as in .venv, i.e. requirements.lock (numba
 # and embreex accept numpy 2.2), except those Debian provides above as numpy-2 builds.
-DEBIAN_PROVIDED="scipy pillow typing_extensions"
+# typing_extensions comes from the lock too: pydantic-core needs a newer one (Sentinel)
+# than Debian's (it is pure Python, so /opt/relray-py313's copy simply wins).
+DEBIAN_PROVIDED="scipy pillow"
 CHROOT_RECIPE="v1 $SUITE $APT_PACKAGES"
 
 say() { echo "test-blender: $*"; }
