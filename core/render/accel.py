@@ -33,13 +33,15 @@ class Hits(NamedTuple):
 
     ``t`` is the distance along the unit direction (``MISS_DISTANCE`` where nothing
     was hit), ``prim`` the triangle index (-1 on a miss), ``u, v`` the barycentric
-    coordinates of the hit on that triangle.
+    coordinates of the hit on that triangle; ``seg`` the moving segment hit (-1: static;
+    :mod:`.rest_frames`), None from a single BVH.
     """
 
     t: np.ndarray
     prim: np.ndarray
     u: np.ndarray
     v: np.ndarray
+    seg: np.ndarray | None = None
 
 
 class Accel:
@@ -68,14 +70,18 @@ class Accel:
         """Lab points -> the float32 coordinates the BVH stores (translated by -origin)."""
         return np.ascontiguousarray((np.asarray(points, np.float64) - self.origin), np.float32)
 
-    def intersect(self, o_local: np.ndarray, d: np.ndarray) -> Hits:
-        """Nearest hit of rays ``o_local + t d`` (origins already in local coordinates)."""
+    def intersect(self, o_local: np.ndarray, d: np.ndarray,
+                  tmax: np.ndarray | None = None) -> Hits:
+        """Nearest hit of rays ``o_local + t d`` (origins already in local coordinates),
+        0 < t < ``tmax`` (float32 (N,); default: unbounded). Where ``tmax`` is given, a
+        miss keeps t = tmax (``prim`` -1 tells it)."""
         if len(o_local) == 0:
             e = np.empty(0, np.float32)
             return Hits(e, np.empty(0, np.int32), e, e)
         # tfar starts at MISS_DISTANCE (embreex fills its float32 tfar array with a scalar
         # ``dists``) and Embree leaves it there on a miss, so t needs no pass of its own
-        r = self._scene.run(o_local, d, dists=_MISS_TFAR, output=1)
+        dists = _MISS_TFAR if tmax is None else np.ascontiguousarray(tmax, np.float32)
+        r = self._scene.run(o_local, d, dists=dists, output=1)
         return Hits(r["tfar"], r["primID"], r["u"], r["v"])
 
     def occluded(self, o_local: np.ndarray, d: np.ndarray, tmax: np.ndarray) -> np.ndarray:

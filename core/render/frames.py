@@ -43,6 +43,7 @@ from .integrator import (
 )
 from .lights import LightTable, build_lights
 from .materials import SpectralTables, build_tables
+from .rest_frames import GroupAccel, MovingScene
 from .sampling import path_keys, progressive_offsets
 
 WAVEFRONT = 1 << 16
@@ -56,32 +57,67 @@ ESCAPED_DEPTH = 1e10
 
 @dataclass
 class PreparedScene:
-    """A scene ready for the kernels; static, so shared by every frame."""
+    """A scene ready for the kernels; shared by every frame.
+
+    ``accel`` is the static lab BVH (None when every object moves), ``tracer`` what the
+    integrator traces: that BVH, or the :class:`.rest_frames.MovingScene` over it and the
+    velocity groups' BVHs. ``origin`` is the lab point of the accelerator coordinates,
+    ``radius`` the static scene's bounding sphere about it (inf when objects move: they
+    are not bounded over time)."""
 
     scene: Scene
-    accel: Accel
+    accel: Accel | None
     tables: SpectralTables
     lights: LightTable
     kernel: KernelScene
     radius: float
     mode: str
+    tracer: Accel | MovingScene | None = None
+    origin: np.ndarray | None = None
+
+
+def _bounding_radius(triangles: np.ndarray, origin: np.ndarray) -> float:
+    corners = np.asarray(triangles, np.float64).reshape(-1, 3) - origin
+    return float(np.sqrt((corners**2).sum(1).max())) * 1.001 + 1e-9
 
 
 def prepare(scene: Scene, mode: str) -> PreparedScene:
-    """Build the BVH, the spectral tables and the light table of ``scene``."""
-    accel = Accel(scene.triangles)
-    geom = triangle_geometry(scene.triangles, accel.origin)
-    corners = np.asarray(scene.triangles, np.float64).reshape(-1, 3) - accel.origin
-    radius = float(np.sqrt((corners**2).sum(1).max())) * 1.001 + 1e-9
+    """Build the BVHs (the static scene's and one per velocity group), the spectral tables
+    and the light table of ``scene``."""
+    n_static = scene.n_static
+    tris = scene.triangles
+    accel = Accel(tris[:n_static]) if n_static else None
+    if accel is not None:
+        origin = accel.origin
+    else:
+        lo, hi = scene.bounds()
+        origin = 0.5 * (lo + hi)
+    geoms = [triangle_geometry(tris[:n_static], origin)]
+    groups: list[GroupAccel] = []
+    extent = accel.extent if accel is not None else 0.0
+    first = 0
+    for g, group in enumerate(scene.groups, start=1):
+        rows = np.flatnonzero(scene.tri_group == g)
+        start, stop = int(rows[0]), int(rows[-1]) + 1
+        g_accel = Accel(tris[start:stop])
+        groups.append(GroupAccel(g_accel, start, group.segments, first))
+        first += len(group.segments)
+        geoms.append(triangle_geometry(tris[start:stop], g_accel.origin))
+        extent = max(extent, g_accel.extent)
+    geom = {k: np.concatenate([gm[k] for gm in geoms]) for k in geoms[0]}
+    radius = _bounding_radius(scene.lab_triangles()[:n_static] if n_static
+                              else scene.lab_triangles(), origin)
     tables = build_tables(list(scene.materials), mode)
-    lights = build_lights(scene, tables, accel.origin, geom["area"].astype(np.float64), radius)
-    kscene = kernel_scene(accel, scene.triangles, scene.normals, scene.material_ids, tables,
-                          lights, geom)
-    return PreparedScene(scene, accel, tables, lights, kscene, radius, mode)
-
-
-
-
+    lights = build_lights(scene, tables, origin, geom["area"].astype(np.float64), radius)
+    tracer: Accel | MovingScene | None = accel
+    segments = None
+    if groups:
+        tracer = MovingScene(accel, groups, origin)
+        segments = tracer.segment_table()
+        radius = math.inf
+    kscene = kernel_scene(extent, scene.normals, scene.material_ids, tables, lights, geom,
+                          segments)
+    return PreparedScene(scene, accel, tables, lights, kscene, radius, mode, tracer, origin)
 
 
 ADAPTIVE_FIRST_PASS = 64
@@ -162,6 +198,8 @@ class FrameRenderer:
         self.doppler = settings.doppler and not self.rgb_mode
         self.searchlight = settings.searchlight and mode == "cie1931"
         self.threads = settings.threads or os.cpu_count() or 1
+        # moving bodies shift and beam as the camera does (physics.md, "Moving objects")
+        self.kernel = prep.kernel._replace(shift=self.doppler, beam=self.searchlight)
         self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
 
     def render(self, event: relativity.ShutterEvent, frame: int,
@@ -244,7 +282,7 @@ class FrameRenderer:
         samp.reshape(len(pixels), n_s)[:] = np.arange(s0, s1, dtype=np.int64)
         keys = path_keys(s.seed, frame, pix, samp)
         o_local, d_lab, D, skipped = self.camera.primary_rays(
-            event.beta, keys, pix, np.asarray(event.x, np.float64) - prep.accel.origin,
+            event.beta, keys, pix, np.asarray(event.x, np.float64) - prep.origin,
             prep.radius)
         lanes = (b["lam"], b["pdf"], b["lamu"], b["w_d"])
         if self.rgb_mode:  # columns 0..2 of the RGB tables; w_d = 1 (no searchlight)
@@ -258,12 +296,15 @@ class FrameRenderer:
             lam, pdf, lamu, w_d, d_min, d_max = self.sampler.lanes(
                 u, D, doppler=self.doppler, searchlight=self.searchlight, out=lanes)
             nlanes = 4
-        L, t_hit = trace(prep.kernel, prep.accel, s.max_depth, keys, o_local, d_lab, lamu,
-                         nlanes, sky_seen=not s.transparent, buffers=keep.setdefault("trace", {}))
+        L, t_hit, seg = trace(self.kernel, prep.tracer, s.max_depth, keys, o_local, d_lab,
+                              lamu, nlanes, sky_seen=not s.transparent,
+                              buffers=keep.setdefault("trace", {}), t0=float(event.t))
         alpha = np.less(t_hit, MISS_DISTANCE, out=b["alpha"])  # 1.0 where it hit
         sensor, lam_weight = b["sensor"], b["lam_weight"]
         sensor_values(L, lam, pdf, w_d, self.response, self.rgb_mode, sensor, lam_weight,
                       self.bands is not None)
+        if "doppler" in self.aovs and prep.scene.groups:
+            D = D * body_doppler(prep.tracer, d_lab, seg)
         aov = {"doppler": D}  # the AOV arrays only when the film has them
         if "depth" in self.aovs or "lab_time" in self.aovs:
             dist = np.where(alpha > 0.0, t_hit + skipped, ESCAPED_DEPTH)
@@ -288,6 +329,18 @@ class FrameRenderer:
 
 
 
+
+
+def body_doppler(tracer: MovingScene, d_lab: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """D_u = ν_lab/ν_rest = 1/(γ_u (1 + u·d)) of the moving body each primary ray hit
+    (1 where it hit a static one or nothing), for the ``doppler`` AOV ν_camera/ν_rest."""
+    out = np.ones(len(seg))
+    segments = [s for g in tracer.groups for s in g.segments]
+    for k in np.unique(seg[seg >= 0]):
+        rows = seg == k
+        out[rows] = 1.0 / np.asarray(relativity.doppler_factor_lab(
+            d_lab[rows].astype(np.float64), segments[k].u), np.float64).reshape(-1)
+    return out
 
 
 def build_renderer(job: Job, scene: Scene | None = None,

@@ -31,6 +31,8 @@ import numpy as np
 from numba import njit
 
 from ..physics import spectrum
+from ..physics.relativity import aberrate_doppler_ray
+from ..physics.spectrum import INV_DLOG
 from ..scene.geometry import ray_offset, ray_offset_at
 from .accel import MISS_DISTANCE, Accel
 from .bsdf import (
@@ -49,6 +51,7 @@ from .lights import (
     triangle_light_pdf,
 )
 from .materials import SpectralTables
+from .rest_frames import MovingScene
 from .sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -99,6 +102,11 @@ class KernelScene(NamedTuple):
     sky_pmf: float
     sky_row: int
     eps: float
+    seg_h: np.ndarray   # float64 (S, 3): per moving segment, the unit direction of u
+    seg_b: np.ndarray   # float64 (S,): |u|
+    seg_ig: np.ndarray  # float64 (S,): 1/γ_u
+    shift: bool         # bodies shift wavelengths (``doppler``, not rgb)
+    beam: bool          # bodies apply D⁵ (``searchlight``)
 
 
 class Paths(NamedTuple):
@@ -113,6 +121,7 @@ class Paths(NamedTuple):
     prev_delta: np.ndarray  # int32 (N,): 1 when that was a delta lobe (or the camera)
     e_row: np.ndarray       # int32 (N,): emission row NEE looked up last (-1: none)
     e_val: np.ndarray       # float32 (N, 4): its values per lane
+    lamu: np.ndarray        # float32 (N, 4): each lane's table coordinate (unclamped)
 
 
 class Rays(NamedTuple):
@@ -121,6 +130,7 @@ class Rays(NamedTuple):
     idx: np.ndarray  # int64 (N,): the ray's path
     o: np.ndarray    # float32 (N, 3): origin (accelerator coordinates)
     d: np.ndarray    # float32 (N, 3): unit direction
+    t: np.ndarray    # float64 (N,): lab time of the origin event
 
 
 class ShadowRays(NamedTuple):
@@ -131,12 +141,18 @@ class ShadowRays(NamedTuple):
     d: np.ndarray    # float32 (N, 3)
     t: np.ndarray    # float32 (N,): length
     c: np.ndarray    # float32 (N, 4): contribution per hero lane
+    t0: np.ndarray   # float64 (N,): lab time of the origin event
 
 
-def kernel_scene(accel: Accel, triangles: np.ndarray, normals: np.ndarray | None,
+def kernel_scene(extent: float, normals: np.ndarray | None,
                  material_ids: np.ndarray, tables: SpectralTables, lights: LightTable,
-                 geometry: dict[str, np.ndarray]) -> KernelScene:
-    """Pack the scene for the kernels."""
+                 geometry: dict[str, np.ndarray],
+                 segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                 ) -> KernelScene:
+    """Pack the scene for the kernels (``extent``: the largest BVH's, for the ray offset;
+    ``segments``: :meth:`.rest_frames.MovingScene.segment_table`)."""
+    if segments is None:
+        segments = (np.zeros((0, 3)), np.zeros(0), np.ones(0))
     vn = (np.zeros((1, 3, 3), np.float32) if normals is None
           else np.ascontiguousarray(normals, np.float32))
     return KernelScene(
@@ -146,7 +162,7 @@ def kernel_scene(accel: Accel, triangles: np.ndarray, normals: np.ndarray | None
         tables.mat_weights, tables.mat_alpha, tables.mat_ior, tables.mat_emit_row,
         tables.mat_one_sided, lights.kind, lights.prim, lights.pos, lights.dir, lights.row,
         lights.scale, lights.spot, lights.cdf, lights.tri_pmf, float(lights.sky_pmf),
-        int(lights.sky_row), ray_offset(accel.extent))
+        int(lights.sky_row), ray_offset(extent), *segments, False, False)
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
@@ -242,12 +258,68 @@ def shadow_ray(p, g, eps, target, wi, finite):
     """The shadow ray of NEE from the hit p (normal g, offset ε): (origin, unit direction,
     length) towards ``target`` for a finite light (shortened by 1e-4 of its length so as
     not to hit the light), else along ``wi`` with length 1e30."""
-    o = offset_point(p, g, eps, 1.0)
+    return shadow_ray_from(offset_point(p, g, eps, 1.0), target, wi, finite)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def shadow_ray_from(o, target, wi, finite):
+    """:func:`shadow_ray` from the already offset origin ``o``."""
     if finite:
         sx, sy, sz = target[0] - o[0], target[1] - o[1], target[2] - o[2]
         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
         return o, (sx / sl, sy / sl, sz / sl), sl * (1.0 - 1e-4)
     return o, wi, 1e30
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lab_offset(pl, g, eps, side, h, b, ig):
+    """The lab event of a point of a moving body offset off its surface: the rest-frame
+    displacement y = ε · side · g (S_u) from the lab hit point ``pl`` is the lab
+    displacement Λ(-u)(0, y) = (γ u·y, y + γ²/(γ+1) (u·y) u), u = b h, ig = 1/γ.
+    Returns (the lab point, the lab time to add)."""
+    yx, yy, yz = g[0] * eps * side, g[1] * eps * side, g[2] * eps * side
+    gam = 1.0 / ig
+    uy = b * (h[0] * yx + h[1] * yy + h[2] * yz)
+    c = gam * gam / (gam + 1.0) * uy * b
+    return (pl[0] + yx + c * h[0], pl[1] + yy + c * h[1], pl[2] + yz + c * h[2]), gam * uy
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def shift_lanes(lamu, li, lf, pi, shift, nlanes, top):
+    """Move path ``pi``'s lanes by ``shift`` table columns (a Doppler factor D is
+    ln(D) · INV_DLOG on the log grid) and update their (i, f) (:func:`column_split`)."""
+    for j in range(nlanes):
+        u = lamu[pi, j] + shift
+        lamu[pi, j] = u
+        uc = min(max(np.float64(u), 0.0), np.float64(top))
+        i = min(int(uc), top - 1)
+        li[pi, j] = i
+        lf[pi, j] = uc - i
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lerp_at(table, row, u, top):
+    """table[row] linearly interpolated at the column u (clamped to [0, top])."""
+    uc = min(max(np.float64(u), 0.0), np.float64(top))
+    i = min(int(uc), top - 1)
+    return lerp(table, row, i, uc - i)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def change_frame(thr, lamu, li, lf, e_row, pi, D, shift, beam, nlanes, top):
+    """The backward path crosses into another frame (physics.md, "Moving objects"):
+    radiance there is looked up at λ_next = D · λ and L(λ) = D⁵ L_next(D λ). At a hit on a
+    moving body D = D_u = 1/(γ_u (1 + u·d)) (lab into the rest frame), when it leaves
+    D = D_out = γ_u (1 + u·d′) (rest frame into the lab). The lanes shift by ln(D)·INV_DLOG
+    columns when ``shift``, the throughput takes D⁵ when ``beam``; the cached emission
+    row is dropped."""
+    if beam:
+        d5 = D * D * D * D * D
+        for j in range(nlanes):
+            thr[pi, j] *= d5
+    if shift:
+        shift_lanes(lamu, li, lf, pi, math.log(D) * INV_DLOG, nlanes, top)
+        e_row[pi] = -1
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -301,11 +373,12 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
     (s_v0, s_e1, s_e2, s_ng, s_area, s_vn, s_has_vn, s_tri_mat, s_refl, s_emit, s_mat_w,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
-     s_eps) = sc
-    keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val = paths
-    idx, o, d = rays
-    t_hit, prim, bu, bv = hits
-    sh_idx, sh_o, sh_d, sh_t, sh_c = shadows
+     s_eps, s_seg_h, s_seg_b, s_seg_ig, s_shift, s_beam) = sc
+    keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu = paths
+    idx, o, d, rt = rays
+    t_hit, prim, bu, bv, hseg = hits
+    sh_idx, sh_o, sh_d, sh_t, sh_c, sh_t0 = shadows
+    top = s_emit.shape[1] - 1
     dim_light = bounce_dim(depth, DIM_LIGHT)
     dim_lobe = bounce_dim(depth, DIM_LOBE)
     dim_bsdf = bounce_dim(depth, DIM_BSDF)
@@ -327,6 +400,23 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
                 for j in range(nlanes):
                     L[pi, j] += thr[pi, j] * w * lerp(s_emit, s_sky_row, li[pi, j], lf[pi, j])
             continue
+        # ---- a moving body: the rest of the bounce happens in its rest frame S_u
+        t_ev = rt[i] - t_hit[i]  # the hit's lab time
+        sg = hseg[i]
+        moving = sg >= 0
+        sh = (0.0, 0.0, 0.0)
+        sb = 0.0
+        sig = 1.0
+        d_out = 1.0
+        pl = (o[i, 0], o[i, 1], o[i, 2])
+        if moving:
+            sh = (s_seg_h[sg, 0], s_seg_h[sg, 1], s_seg_h[sg, 2])
+            sb = s_seg_b[sg]
+            sig = s_seg_ig[sg]
+            pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
+            rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb, sig)
+            dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
+            change_frame(thr, lamu, li, lf, e_row, pi, d_u, s_shift, s_beam, nlanes, top)
         # ---- the hit and its emission
         m = s_tri_mat[tri]
         p, g = surface_point(s_v0, s_e1, s_e2, s_ng, tri, bu[i], bv[i])
@@ -337,7 +427,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
         er = s_mat_emit_row[m]
         if er >= 0 and (front or s_mat_one_sided[m] == 0):
             w = 1.0
-            if depth > 0 and prev_delta[pi] == 0:
+            if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[tri] > 0.0:
                 w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
                     s_tri_pmf[tri], s_area[tri], t_hit[i], cos_g))
             for j in range(nlanes):
@@ -361,19 +451,46 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
             k, p_sel, cdf_k = select(s_l_cdf, u_a)
             light = light_record(k, s_l_kind, s_l_prim, s_l_pos, s_l_dir, s_l_scale, s_l_spot,
                                  s_v0, s_e1, s_e2, s_ng, s_area, s_tri_mat, s_mat_one_sided)
-            wi, p_l, scale, delta, finite, target, ok = sample_light(
-                light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, p[0], p[1], p[2], eps)
-            ok, kd, km, s, c = nee_factors(wo, wi, nrm, g, p_l, scale, delta, ok, wd, wm, a2)
+            if moving:  # lights are sampled in the lab, from the hit's lab point
+                eps_l = ray_offset_at(s_eps, pl[0], pl[1], pl[2])
+                wi, p_l, scale, delta, finite, target, ok = sample_light(
+                    light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, pl[0], pl[1], pl[2],
+                    eps_l)
+                # ... and seen in S_u: wi_u and D_out = γ_u (1 + u·wi); the pdf per S_u
+                # solid angle is p_l D_out² (dΩ_u = dΩ_lab / D_out²)
+                wux, wuy, wuz, inv_dout = aberrate_doppler_ray(wi[0], wi[1], wi[2], -sh[0],
+                                                               -sh[1], -sh[2], sb, sig)
+                d_out = 1.0 / inv_dout
+                ok, kd, km, s, c = nee_factors(wo, (wux, wuy, wuz), nrm, g,
+                                               p_l * d_out * d_out, scale, delta, ok, wd, wm, a2)
+            else:
+                wi, p_l, scale, delta, finite, target, ok = sample_light(
+                    light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, p[0], p[1], p[2],
+                    eps)
+                ok, kd, km, s, c = nee_factors(wo, wi, nrm, g, p_l, scale, delta, ok, wd, wm,
+                                               a2)
             if ok:
                 row = s_l_row[k]
-                if e_row[pi] != row:  # the light's spectrum, cached per path
-                    e_row[pi] = row
+                if moving:  # the light's spectrum at λ_lab′ = D_out λ_rest, times D_out⁵
+                    lshift = math.log(d_out) * INV_DLOG if s_shift else 0.0
+                    if s_beam:
+                        c *= d_out * d_out * d_out * d_out * d_out
                     for j in range(nlanes):
-                        e_val[pi, j] = lerp(s_emit, row, li[pi, j], lf[pi, j])
-                for j in range(nlanes):
-                    sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
-                        * e_val[pi, j]
-                so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
+                        sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
+                            * lerp_at(s_emit, row, lamu[pi, j] + lshift, top)
+                    so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
+                    so, sd, st = shadow_ray_from(so, target, wi, finite)
+                    sh_t0[n_sh] = t_ev + dt_o
+                else:
+                    if e_row[pi] != row:  # the light's spectrum, cached per path
+                        e_row[pi] = row
+                        for j in range(nlanes):
+                            e_val[pi, j] = lerp(s_emit, row, li[pi, j], lf[pi, j])
+                    for j in range(nlanes):
+                        sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
+                            * e_val[pi, j]
+                    so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
+                    sh_t0[n_sh] = t_ev
                 sh_idx[n_sh] = pi
                 sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = so[0], so[1], so[2]
                 sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]
@@ -389,6 +506,12 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
             thr[pi, j] *= lane_weight(weight, rho_j[j])
         prev_pdf[pi] = pdf
         prev_delta[pi] = 1 if delta else 0
+        if moving:  # back into the lab: wi and D_out; the pdf per lab solid angle
+            wlx, wly, wlz, d_out = aberrate_doppler_ray(wi[0], wi[1], wi[2], sh[0], sh[1],
+                                                        sh[2], sb, sig)
+            change_frame(thr, lamu, li, lf, e_row, pi, d_out, s_shift, s_beam, nlanes, top)
+            prev_pdf[pi] = pdf / (d_out * d_out)
+            wi = (wlx, wly, wlz)
         # ---- Russian roulette
         if depth + 1 >= RR_DEPTH:
             q = 0.0
@@ -401,7 +524,12 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
                     thr[pi, j] /= q
         k_a = n_alive
         idx[k_a] = pi
-        o_next = offset_point(p, g, eps, -1.0 if transmitted else 1.0)
+        if moving:
+            o_next, dt_o = lab_offset(pl, g, eps, -1.0 if transmitted else 1.0, sh, sb, sig)
+            rt[k_a] = t_ev + dt_o
+        else:
+            o_next = offset_point(p, g, eps, -1.0 if transmitted else 1.0)
+            rt[k_a] = t_ev
         o[k_a, 0], o[k_a, 1], o[k_a, 2] = o_next[0], o_next[1], o_next[2]
         d[k_a, 0], d[k_a, 1], d[k_a, 2] = wi[0], wi[1], wi[2]
         n_alive += 1
@@ -469,7 +597,8 @@ _TRACE_BUFFERS = (("L", 4, np.float32), ("thr", 4, np.float32), ("prev_pdf", 0, 
                   ("prev_delta", 0, np.int32), ("idx", 0, np.int64), ("sh_idx", 0, np.int64),
                   ("sh_o", 3, np.float32), ("sh_d", 3, np.float32), ("sh_t", 0, np.float32),
                   ("sh_c", 4, np.float32), ("li", 4, np.int32), ("lf", 4, np.float32),
-                  ("e_row", 0, np.int32), ("e_val", 4, np.float32))
+                  ("e_row", 0, np.int32), ("e_val", 4, np.float32), ("lamu", 4, np.float32),
+                  ("rt", 0, np.float64), ("sh_t0", 0, np.float64), ("seg", 0, np.int32))
 
 
 def wavefront_buffers(n: int, keep: dict | None = None,
@@ -490,38 +619,57 @@ def wavefront_buffers(n: int, keep: dict | None = None,
     return {name: keep[name][:n] for name, _, _ in specs}
 
 
-def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray, o_local: np.ndarray,
-          d: np.ndarray, lamu: np.ndarray, nlanes: int, sky_seen: bool = True,
-          buffers: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Trace a wavefront of camera rays; returns (L (N,4) lab radiance, primary hit t).
+def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.ndarray,
+          o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
+          sky_seen: bool = True, buffers: dict | None = None,
+          t0: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Trace a wavefront of camera rays; returns (L (N,4) lab radiance, primary hit t,
+    primary hit's moving segment or -1).
 
     ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit;
-    both are used as the wavefront's ray buffers and are overwritten.  ``buffers``: see
-    :func:`wavefront_buffers` (the returned L lives in them until the next call).
+    both are used as the wavefront's ray buffers and are overwritten; ``t0`` the lab time
+    of their origin event. ``accel``: a static scene's BVH, or the
+    :class:`.rest_frames.MovingScene` when objects move (then every ray carries its lab
+    time). ``buffers``: see :func:`wavefront_buffers` (the returned L lives in them until
+    the next call).
     """
     n = len(keys)
     b = wavefront_buffers(n, buffers)
     paths = Paths(keys, b["L"], b["thr"], b["li"], b["lf"], b["prev_pdf"], b["prev_delta"],
-                  b["e_row"], b["e_val"])
+                  b["e_row"], b["e_val"], b["lamu"])
     start_paths(paths.L, paths.thr, paths.prev_pdf, paths.prev_delta, b["idx"], paths.e_row)
+    paths.lamu[:] = lamu
     # shade compacts the rays in place: float32 C-contiguous inputs are used (and
     # overwritten) as they are, anything else is converted once
     rays = Rays(b["idx"], np.ascontiguousarray(o_local, np.float32),
-                np.ascontiguousarray(d, np.float32))
-    shadows = ShadowRays(b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"])
+                np.ascontiguousarray(d, np.float32), b["rt"])
+    rays.t[:] = t0
+    shadows = ShadowRays(b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"], b["sh_t0"])
     column_split(lamu, sc.emit.shape[1], paths.li, paths.lf)
-    first_t = None
+    moving = isinstance(accel, MovingScene)
+    static_seg = b["seg"]
+    if not moving:
+        static_seg[:] = -1
+    first_t = first_seg = None
     m = n
     for depth in range(max_depth):
-        hits = accel.intersect(rays.o[:m], rays.d[:m])
+        if moving:
+            hits = accel.intersect(rays.o[:m], rays.d[:m], rays.t[:m])
+        else:
+            hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
         if depth == 0:
-            first_t = hits.t
+            first_t, first_seg = hits.t, hits.seg.copy()
         m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen)
         if ns:
-            blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns])
+            if moving:
+                blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns],
+                                         shadows.t0[:ns])
+            else:
+                blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns])
             add_shadows(shadows.idx[:ns], blocked, shadows.c[:ns], paths.L, nlanes)
         if m == 0:
             break
     if first_t is None:
         first_t = np.full(n, MISS_DISTANCE, np.float32)
-    return paths.L, first_t
+        first_seg = np.full(n, -1, np.int32)
+    return paths.L, first_t, first_seg

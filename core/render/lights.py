@@ -70,7 +70,12 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
     kinds, prims, pos, dirs, rows, scales, spots, power = [], [], [], [], [], [], [], []
     emit_rows = tables.mat_emit_row[scene.material_ids]
     lum = {r: row_luminance(tables.emit[r], mode) for r in np.unique(emit_rows[emit_rows >= 0])}
-    for t in np.flatnonzero(emit_rows >= 0):
+    # emitters on moving objects are reached by BSDF sampling only (physics.md allows it:
+    # NEE would have to solve for the emission event on their worldline), so they are
+    # not in the table and their hits keep the MIS weight 1
+    tri_group = getattr(scene, "tri_group", None)
+    static = emit_rows >= 0 if tri_group is None else (emit_rows >= 0) & (tri_group == 0)
+    for t in np.flatnonzero(static):
         m = scene.material_ids[t]
         sides = 1.0 if tables.mat_one_sided[m] else 2.0
         p = area[t] * math.pi * sides * lum[emit_rows[t]]

@@ -151,6 +151,16 @@ class MaterialSpec:
 
 
 @dataclass(frozen=True, eq=False)
+class Worldline:
+    """A piecewise-linear lab worldline of an object's pivot: at lab time ``t[k]`` (n,)
+    (strictly increasing, n >= 2) the pivot is at ``pivot[k]`` (n, 3); every segment is
+    slower than light."""
+
+    t: np.ndarray
+    pivot: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
 class ObjectSpec:
     """One ``[[objects]]`` entry.
 
@@ -182,6 +192,8 @@ class ObjectSpec:
     material: str
     params: dict[str, Any]
     velocity: np.ndarray = field(default_factory=lambda: frozen(np.zeros(3)))
+    pivot: np.ndarray = field(default_factory=lambda: frozen(np.zeros(3)))
+    worldline: Worldline | None = None
 
 
 @dataclass(frozen=True, eq=False)

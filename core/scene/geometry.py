@@ -69,9 +69,10 @@ import numpy as np
 from numba import njit
 
 from ..errors import UserError
-from . import gltf, shapes
+from . import gltf, shapes, worldlines
 from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
 from .footprint import check_memory
+from .worldlines import VelocityGroup
 
 log = logging.getLogger("relray")
 
@@ -97,13 +98,35 @@ class Scene:
     camera: CameraSettings | None  # the glTF file's first camera, if any
     dropped_degenerate: int = 0
     unresolved: int = 0  # triangles smaller than the ray offset (see the module docstring)
+    # moving objects (scene.worldlines): per triangle its velocity group, 0 static, g >= 1
+    # groups[g - 1], whose triangles are contiguous and in that group's rest-frame
+    # coordinates; None when nothing moves
+    tri_group: np.ndarray | None = None
+    groups: tuple[VelocityGroup, ...] = ()
+
+    @property
+    def n_static(self) -> int:
+        """The static triangles come first: triangles[:n_static]."""
+        return len(self.triangles) if self.tri_group is None else int(
+            np.count_nonzero(self.tri_group == 0))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned (min, max) corners, float64 (3,) each; zeros for an empty scene."""
         if len(self.triangles) == 0:
             return np.zeros(3), np.zeros(3)
-        pts = self.triangles.reshape(-1, 3).astype(np.float64)
+        pts = self.lab_triangles().reshape(-1, 3)
         return pts.min(axis=0), pts.max(axis=0)
+
+    def lab_triangles(self) -> np.ndarray:
+        """float64 (T, 3, 3): static triangles as they are, a moving group's placed at the
+        origin event of its first segment (uncontracted: for bounds and framing only)."""
+        tris = np.asarray(self.triangles, np.float64)
+        if self.tri_group is None:
+            return tris
+        shift = np.zeros((len(self.groups) + 1, 3))
+        for g, group in enumerate(self.groups, start=1):
+            shift[g] = group.segments[0].p_ref
+        return tris + shift[self.tri_group][:, None, :]
 
 
 @dataclass
@@ -111,6 +134,7 @@ class _Part:
     triangles: np.ndarray  # float64 (F, 3, 3)
     normals: np.ndarray | None  # float64 (F, 3, 3)
     material_id: np.ndarray | int
+    group: int = 0  # velocity group (scene.worldlines), 0 static
 
 
 def _repeat_face_normals(triangles: np.ndarray) -> np.ndarray:
@@ -268,9 +292,12 @@ def build_scene(job: Job) -> Scene:
         lights += gl_lights
     ids = {m.name: len(materials) + i for i, m in enumerate(job.scene.materials)}
     materials += job.scene.materials
+    group_of, groups, offsets = worldlines.rest_frame_offsets(list(job.scene.objects))
     for i, obj in enumerate(job.scene.objects):
         tris, norms = tessellate(obj, f"objects[{i}]", job.path)
-        parts.append(_Part(tris, norms, ids[obj.material]))
+        if group_of[i]:
+            tris = tris + offsets[i]
+        parts.append(_Part(tris, norms, ids[obj.material], group_of[i]))
         named.append((f"objects[{i}]", len(tris)))
         if obj.shape == "mesh":
             lighten[f"objects[{i}]"] = f"objects[{i}].file"
@@ -278,9 +305,14 @@ def build_scene(job: Job) -> Scene:
     check_memory(job.render, job.output, [(lighten.get(key, key), n) for key, n in named],
                  job.path)
     triangles, normals, material_ids = _concatenate(parts)
+    tri_group = None
+    if groups:
+        tri_group = np.concatenate([np.full(len(p.triangles), p.group, np.int32)
+                                    for p in parts])
     return scene_from_parts(triangles, normals, material_ids, materials,
                             [*lights, *job.scene.lights], job.scene.background, camera,
-                            file=job.path, named_parts=named)
+                            file=job.path, named_parts=named, tri_group=tri_group,
+                            groups=tuple(groups))
 
 
 def scene_from_parts(
@@ -288,6 +320,7 @@ def scene_from_parts(
     materials: Sequence[MaterialSpec], lights: Sequence[LightSpec],
     background: Sequence[float], camera: CameraSettings | None = None, *,
     file: str | Path | None = None, named_parts: Sequence[tuple[str, int]] = (),
+    tri_group: np.ndarray | None = None, groups: tuple[VelocityGroup, ...] = (),
 ) -> Scene:
     """A :class:`Scene` from triangle arrays and specs: what :func:`build_scene` does to
     a job's geometry once it is read (for callers with their own geometry: the add-on).
@@ -302,6 +335,8 @@ def scene_from_parts(
     UserError (key ``scene``, naming ``file``), and so is a part of ``named_parts``
     ((key, triangle count) of the leading triangles in order, e.g. ("objects[2]", 320))
     that lost every triangle: geometry that vanished is an error, never a black frame.
+    ``tri_group`` (T,) and ``groups``: moving objects (:class:`Scene`); the triangles are
+    then ordered by group (stably: the static ones keep their order).
     """
     tris = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     ids = np.broadcast_to(np.asarray(material_ids, dtype=np.int32), (len(tris),))
@@ -321,6 +356,13 @@ def scene_from_parts(
 
     triangles, normals, material_ids = _concatenate(parts)
     triangles, normals, material_ids, keep = _drop_degenerate(triangles, normals, material_ids)
+    if groups:
+        tri_group = np.concatenate([np.asarray(tri_group, np.int32),
+                                    np.zeros(len(keep) - len(tri_group), np.int32)])[keep]
+        order = np.argsort(tri_group, kind="stable")
+        triangles, material_ids, tri_group = triangles[order], material_ids[order], \
+            tri_group[order]
+        normals = None if normals is None else normals[order]
     dropped = int(len(keep) - keep.sum())
     if len(triangles) == 0:  # one message: the error says why (no warning before it)
         why = f" (all {dropped} were degenerate)" if dropped else ""
@@ -348,6 +390,8 @@ def scene_from_parts(
         camera=camera,
         dropped_degenerate=dropped,
         unresolved=unresolved,
+        tri_group=np.ascontiguousarray(tri_group, np.int32) if groups else None,
+        groups=tuple(groups),
     )
 
 
