@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..physics import relativity
 from .description import ObjectSpec
 
 #: The emission-time window of a worldline's open ends.
@@ -53,9 +54,8 @@ class Segment:
 
     @property
     def gamma(self) -> float:
-        """γ_u = 1/sqrt((1 - b)(1 + b)), b = |u|."""
-        b = float(np.linalg.norm(self.u))
-        return 1.0 / math.sqrt((1.0 - b) * (1.0 + b))
+        """γ_u = 1/sqrt((1 - b)(1 + b)), b = |u| (:func:`relativity.gamma`)."""
+        return float(relativity.gamma(self.u))
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,8 +76,7 @@ def spatial_boost(u: np.ndarray, x: np.ndarray) -> np.ndarray:
     """B x = x + γ²/(γ+1) (u·x) u: the S_u coordinates of a lab separation x at equal lab
     time, as a vector or rows (..., 3) (the rest length along u is γ times the lab one)."""
     u = np.asarray(u, np.float64)
-    b2 = float(u @ u)
-    g = 1.0 / math.sqrt(1.0 - b2) if b2 < 1.0 else math.inf
+    g = float(relativity.gamma(u))
     x = np.asarray(x, np.float64)
     return x + (g * g / (g + 1.0)) * (x @ u)[..., None] * u
 

@@ -1,0 +1,144 @@
+"""4D intersection in rest frames (core/render/rest_frames.py) against a brute-force march
+through the lab: a box moving at u occupies, at lab time t, the points x with
+B(x - p - u t) inside its rest shape (B the boost's spatial part)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from relray.core.render.accel import MISS_DISTANCE, Accel
+from relray.core.render.rest_frames import GroupAccel, MovingScene
+from relray.core.scene import shapes
+from relray.core.scene.worldlines import Segment, spatial_boost
+
+HALF = np.array([0.5, 1.0, 0.75])  # the box's rest half-sizes
+
+
+def inside(x: np.ndarray, t: np.ndarray, seg: Segment) -> np.ndarray:
+    """Whether lab events (t, x) lie in the box of ``seg`` (rest frame about its pivot)."""
+    rel = x - seg.p_ref - seg.u * (t - seg.t_ref)[:, None]
+    return np.all(np.abs(spatial_boost(seg.u, rel)) <= HALF, axis=1)
+
+
+def march(x0, d, t0, segs, s_max=60.0, n=60000):
+    """First lab parameter s at which the backward ray (t0 - s, x0 + s d) enters the box
+    of a segment whose window holds the emission time t0 - s; inf if none."""
+    s = np.linspace(0.0, s_max, n)
+    x = x0 + s[:, None] * d
+    t = t0 - s
+    hit = np.zeros(n, bool)
+    for seg in segs:
+        in_window = (t >= seg.t_lo) & (t < seg.t_hi)
+        hit |= in_window & inside(x, t, seg)
+    k = np.flatnonzero(hit)
+    if len(k) == 0:
+        return math.inf
+    lo, hi = s[max(k[0] - 1, 0)], s[k[0]]
+    for _ in range(50):  # bisection on the entry
+        mid = 0.5 * (lo + hi)
+        xm, tm = x0 + mid * d, np.array([t0 - mid])
+        ok = any(((tm >= g.t_lo) & (tm < g.t_hi) & inside(xm[None], tm, g))[0] for g in segs)
+        lo, hi = (lo, mid) if ok else (mid, hi)
+    return hi
+
+
+def retarded(u: np.ndarray, p: np.ndarray, t0: float) -> np.ndarray:
+    """Where the pivot p + u t was when it emitted the light reaching the origin at t0:
+    |p + u t| = t0 - t, the earlier root."""
+    a, b, c = u @ u - 1.0, 2.0 * (p @ u + t0), p @ p - t0 * t0
+    t = (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a) if a else -c / b
+    t = min(t, (-b - math.sqrt(b * b - 4 * a * c)) / (2 * a)) if a else t
+    return p + u * t
+
+
+def scene_of(segs: tuple[Segment, ...]) -> MovingScene:
+    tris = shapes.box(np.zeros(3), 2 * HALF, 0.0)
+    group = GroupAccel(Accel(tris), 0, segs, 0)
+    return MovingScene(None, [group], lab_origin=np.array([0.3, -0.2, 0.1]))
+
+
+def rays(rng, n, t0, aim, spread=2.5):
+    """Rays from near the origin towards points around ``aim``."""
+    x0 = rng.normal(0.0, 0.2, (n, 3))
+    target = aim + rng.uniform(-spread, spread, (n, 3))
+    d = target - x0
+    return x0, d / np.linalg.norm(d, axis=1, keepdims=True), np.full(n, t0)
+
+
+@pytest.mark.parametrize("u", [(0.0, 0.0, 0.0), (0.6, 0.0, 0.0), (0.3, -0.5, 0.2),
+                               (0.0, -0.9, 0.0), (0.0, 0.95, 0.0)])
+def test_constant_velocity_hits_match_the_lab_march(u):
+    rng = np.random.default_rng(7)
+    seg = Segment(np.array(u, np.float64), 0.0, np.array([0.0, 8.0, 0.0]))
+    ms = scene_of((seg,))
+    # the box as seen at t0 = 0: look where its light comes from (its retarded position)
+    aim = retarded(np.array(u), np.array([0.0, 8.0, 0.0]), 0.0)
+    x0, d, t = rays(rng, 150, 0.0, aim, 1.5)
+    h = ms.intersect((x0 - ms.lab_origin).astype(np.float32), d.astype(np.float32), t)
+    reach = 1.5 * float(np.linalg.norm(aim)) + 10.0
+    expect = np.array([march(x0[i], d[i], 0.0, (seg,), reach, int(2000 * reach))
+                       for i in range(len(x0))])
+    hit = np.isfinite(expect)
+    assert 15 < hit.sum() < len(hit) - 15  # both hits and misses are tested
+    # a ray grazing an edge may go either way within the march's step (1e-3)
+    graze = np.abs(h.t - np.where(hit, expect, MISS_DISTANCE)) > 1e-3
+    assert graze.sum() <= 3, (h.t[graze], expect[graze])
+    ok = hit & ~graze
+    np.testing.assert_allclose(h.t[ok], expect[ok], atol=2e-4)  # float32 rays of length ~8
+    assert np.all(h.seg[hit & ~graze] == 0) and np.all(h.prim[~hit & ~graze] == -1)
+
+
+def test_a_worldline_is_seen_where_its_light_left_each_segment():
+    """At rest until lab time 0, then at 0.9 c along x: a camera at t = 5 sees the resting
+    box (emitted at t ≈ -3); at t = 30 the ray to the old place misses, and the box is
+    found where the light that reaches it left the moving segment."""
+    p = np.array([0.0, 8.0, 0.0])
+    segs = (Segment(np.zeros(3), 0.0, p, -math.inf, 0.0),
+            Segment(np.array([0.9, 0.0, 0.0]), 0.0, p, 0.0, math.inf))
+    ms = scene_of(segs)
+    d = np.array([[0.0, 1.0, 0.0]], np.float32)
+    o = (np.zeros((1, 3)) - ms.lab_origin).astype(np.float32)
+    early = ms.intersect(o, d, np.array([5.0]))
+    assert early.seg[0] == 0 and early.t[0] == pytest.approx(7.0, abs=1e-5)
+    assert ms.intersect(o, d, np.array([30.0])).prim[0] == -1
+    rng = np.random.default_rng(3)
+    x0, dd, t = rays(rng, 200, 30.0, retarded(segs[1].u, p, 30.0), 1.5)
+    h = ms.intersect((x0 - ms.lab_origin).astype(np.float32), dd.astype(np.float32), t)
+    expect = np.array([march(x0[i], dd[i], 30.0, segs) for i in range(len(x0))])
+    hit = np.isfinite(expect)
+    assert hit.sum() > 20
+    graze = np.abs(h.t - np.where(hit, expect, MISS_DISTANCE)) > 1e-3
+    assert graze.sum() <= 3
+    np.testing.assert_allclose(h.t[hit & ~graze], expect[hit & ~graze], atol=3e-4)
+    assert np.all(h.seg[hit & ~graze] == 1)
+
+
+def test_a_moving_occluder_blocks_only_while_it_is_in_the_way():
+    """A shadow segment along y through the box's path at x = 0: blocked when the box
+    crosses x = 0 at the time the segment's light passes, free before and after."""
+    seg = Segment(np.array([0.8, 0.0, 0.0]), 0.0, np.array([0.0, 8.0, 0.0]))
+    ms = scene_of((seg,))
+    o = np.repeat((np.zeros((1, 3)) - ms.lab_origin).astype(np.float32), 3, axis=0)
+    d = np.repeat(np.array([[0.0, 1.0, 0.0]], np.float32), 3, axis=0)
+    # the light passing y = 8 left it at t0 - 8: the box is at x = 0.8 (t0 - 8)
+    t0 = np.array([8.0, 8.0 + 5.0, 8.0 - 5.0])
+    blocked = ms.occluded(o, d, np.full(3, 20.0, np.float32), t0)
+    assert blocked.tolist() == [True, False, False]
+    # a segment that ends before the box: never blocked
+    assert not ms.occluded(o[:1], d[:1], np.array([6.0], np.float32), t0[:1])[0]
+
+
+def test_the_nearest_of_static_and_moving_wins():
+    static = Accel(shapes.quad(np.array([[-5, 20, -5], [5, 20, -5], [5, 20, 5], [-5, 20, 5]],
+                                        np.float64)))
+    seg = Segment(np.array([0.5, 0.0, 0.0]), 0.0, np.array([0.0, 8.0, 0.0]))
+    group = GroupAccel(Accel(shapes.box(np.zeros(3), 2 * HALF, 0.0)), 2, (seg,), 0)
+    ms = MovingScene(static, [group], static.origin)
+    o = (np.zeros((2, 3)) - static.origin).astype(np.float32)
+    d = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0]], np.float32)
+    # at t = 7.5 the light from y = 7.5 left at t = 0 (box at x = 0); at t = 40 the box
+    # is far along x, and the wall behind it is hit
+    h = ms.intersect(o, d, np.array([7.5, 40.0]))
+    assert h.seg.tolist() == [0, -1] and h.prim[0] >= 2
+    assert h.t[0] == pytest.approx(7.0, abs=1e-5) and h.t[1] == pytest.approx(20.0, abs=1e-5)
