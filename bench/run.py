@@ -5,7 +5,8 @@
 
 Sections (``--only a,b``): ``throughput`` (Cornell throughput and the stage profile),
 ``scaling`` (1 against 2 threads), ``heavy`` (≥ 1 M triangles), ``beta`` (the |β|
-sweep), ``skips`` (the skip table), ``convergence`` (error against time, relray against
+sweep), ``skips`` (the skip table), ``moving`` (the cost of velocity groups),
+``convergence`` (error against time, relray against
 Cycles, adaptive sampling).  Cycles needs ``bpy`` (5.0.1) in the environment; without
 it the Cycles series are left out and RESULTS.md says so.  Generated meshes and Cycles'
 cached references go to ``OUT/tmp`` (git-ignored).  ``python -m relray.bench.report
@@ -24,9 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from relray.bench import common as cm
-from relray.bench import convergence, embree_floor, report, skips, throughput
+from relray.bench import convergence, embree_floor, report, skips, throughput, velocity_groups
 
-SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "convergence")
+SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "convergence")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -52,6 +53,9 @@ class Plan:
     skip_spp: int = 16
     skip_ref_spp: int = 256
     skip_repeat: int = 3
+    moving_size: int = 128
+    moving_spp: int = 16
+    moving_repeat: int = 5
     anim_frames: int = 24
     anim_separate: int = 24
     anim_spp: int = 16
@@ -65,6 +69,7 @@ FULL = Plan("full")
 QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_repeat=1,
              heavy_size=128, heavy_spp=8, heavy_repeat=1, beta_size=48, beta_spp=8,
              beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
+             moving_size=64, moving_spp=8, moving_repeat=2,
              anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
              conv=convergence.ConvergenceConfig(width=64, height=64,
                                                 spp=[4, 8, 16, 32, 64, 128],
@@ -73,7 +78,8 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
 SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repeat=1,
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
-             skip_spp=2, skip_ref_spp=4, skip_repeat=1, anim_frames=0, anim_separate=0,
+             skip_spp=2, skip_ref_spp=4, skip_repeat=1, moving_size=8, moving_spp=2,
+             moving_repeat=1, anim_frames=0, anim_separate=0,
              anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
              conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
                                                 thresholds=[0.5], repeats=1, ref_factor=2))
@@ -166,6 +172,12 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
                                                 plan.anim_frames))
         cm.write_csv(out / "skips.csv", rows)
         done("skips")
+    if "moving" in sections:
+        section("moving")
+        rows = velocity_groups.group_rows(plan.moving_spp, plan.moving_size, plan.moving_size,
+                                          threads, plan.moving_repeat)
+        cm.write_csv(out / "velocity_groups.csv", rows)
+        done("moving")
     if "convergence" in sections:
         section("convergence")
         cfg = plan.conv

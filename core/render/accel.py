@@ -54,6 +54,9 @@ class Accel:
         lo, hi = tris.reshape(-1, 3).min(0), tris.reshape(-1, 3).max(0)
         self.origin = 0.5 * (lo + hi)
         self.extent = float(np.max(hi - lo))
+        # the bounding sphere about ``origin`` (with room for the float32 rounding)
+        self.bound_radius = float(np.sqrt(((tris - self.origin) ** 2).sum(-1).max())) \
+            * (1.0 + 1e-6) + 1e-6 * self.extent + 1e-30
         self._scene = rtcore_scene.EmbreeScene(robust=robust)
         local = np.ascontiguousarray((tris - self.origin).astype(np.float32))
         self._mesh = mesh_construction.TriangleMesh(self._scene, local)

@@ -319,18 +319,6 @@ class FrameRenderer:
         self._chunk_buffers.append(keep)
 
 
-
-
-
-
-
-
-
-
-
-
-
-
 def body_doppler(tracer: MovingScene, d_lab: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """D_u = ν_lab/ν_rest = 1/(γ_u (1 + u·d)) of the moving body each primary ray hit
     (1 where it hit a static one or nothing), for the ``doppler`` AOV ν_camera/ν_rest."""

@@ -635,6 +635,7 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     """
     n = len(keys)
     b = wavefront_buffers(n, buffers)
+    b["moving"] = (buffers if buffers is not None else {}).setdefault("moving", {})
     paths = Paths(keys, b["L"], b["thr"], b["li"], b["lf"], b["prev_pdf"], b["prev_delta"],
                   b["e_row"], b["e_val"], b["lamu"])
     start_paths(paths.L, paths.thr, paths.prev_pdf, paths.prev_delta, b["idx"], paths.e_row)
@@ -654,7 +655,7 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     m = n
     for depth in range(max_depth):
         if moving:
-            hits = accel.intersect(rays.o[:m], rays.d[:m], rays.t[:m])
+            hits = accel.intersect(rays.o[:m], rays.d[:m], rays.t[:m], b["moving"])
         else:
             hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
         if depth == 0:
@@ -663,7 +664,7 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
         if ns:
             if moving:
                 blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns],
-                                         shadows.t0[:ns])
+                                         shadows.t0[:ns], b["moving"])
             else:
                 blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns])
             add_shadows(shadows.idx[:ns], blocked, shadows.c[:ns], paths.L, nlanes)

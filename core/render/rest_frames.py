@@ -26,8 +26,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from ..physics import relativity
+from ..physics.relativity import aberrate_doppler_ray
 from ..scene.worldlines import Segment
 from .accel import MISS_DISTANCE, Accel, Hits
 
@@ -43,31 +44,68 @@ class GroupAccel:
     first_segment: int
 
 
-@dataclass(frozen=True, eq=False)
-class _RestRays:
-    """One segment's view of a batch of lab rays."""
+@njit(cache=True, nogil=True, error_model="numpy")
+def rest_rays(o, d, t, best, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius,
+              rows, o_u, d_u, k, s_lo, tmax):
+    """The lab rays (accelerator-local origins ``o``, unit ``d``, origin lab times ``t``)
+    as rest-frame rays of one segment (u = b h, 1/γ = ``ig``, frame origin event
+    (t_ref, q) in accelerator coordinates, emission window [t_lo, t_hi)), for the part of
+    each ray before ``best`` (the nearest lab hit so far) and inside the window (module
+    docstring). Rays that cannot reach the group's bounding sphere (rest-frame ``centre``,
+    the BVH's origin, and ``radius``) are left out. Writes the kept rays' index into ``rows``
+    and their start ``o_u`` (BVH coordinates), ``d_u``, k = s_u/s_lab, the lab start
+    ``s_lo`` and the rest-frame length ``tmax``; returns how many were kept."""
+    g = 1.0 / ig
+    c = g * g / (g + 1.0)
+    ux, uy, uz = b * h[0], b * h[1], b * h[2]
+    n = 0
+    for i in range(o.shape[0]):
+        lo = max(0.0, t[i] - t_hi)
+        hi = min(np.float64(best[i]), t[i] - t_lo)
+        if hi <= lo:
+            continue
+        dux, duy, duz, du = aberrate_doppler_ray(np.float64(d[i, 0]), np.float64(d[i, 1]),
+                                                 np.float64(d[i, 2]), -h[0], -h[1], -h[2],
+                                                 b, ig)
+        kk = 1.0 / du
+        dt = t[i] - t_ref
+        ex, ey, ez = o[i, 0] - q[0], o[i, 1] - q[1], o[i, 2] - q[2]
+        ue = c * (ux * ex + uy * ey + uz * ez) - g * dt
+        sx = ex + ue * ux + kk * lo * dux - centre[0]
+        sy = ey + ue * uy + kk * lo * duy - centre[1]
+        sz = ez + ue * uz + kk * lo * duz - centre[2]
+        length = kk * (hi - lo)
+        # the bounding sphere: the nearest approach of the segment [0, length]
+        along = -(sx * dux + sy * duy + sz * duz)
+        along = min(max(along, 0.0), length)
+        px, py, pz = sx + along * dux, sy + along * duy, sz + along * duz
+        if px * px + py * py + pz * pz > radius * radius:
+            continue
+        rows[n] = i
+        o_u[n, 0], o_u[n, 1], o_u[n, 2] = sx, sy, sz
+        d_u[n, 0], d_u[n, 1], d_u[n, 2] = dux, duy, duz
+        k[n] = kk
+        s_lo[n] = lo
+        tmax[n] = length
+        n += 1
+    return n
 
-    o: np.ndarray      # float32 (N, 3): start of the rest-frame ray (the group's BVH coords)
-    d: np.ndarray      # float32 (N, 3): d_u
-    k: np.ndarray      # float64 (N,): s_u / s_lab
-    s_lo: np.ndarray   # float64 (N,): the lab parameter where the rest-frame ray starts
 
-
-def rest_rays(seg: Segment, accel: Accel, lab_origin: np.ndarray, x: np.ndarray,
-              d: np.ndarray, t: np.ndarray, s_lo: np.ndarray) -> _RestRays:
-    """Lab rays (accelerator-local points ``x``, directions ``d``, lab times ``t``) as
-    rest-frame rays of ``seg``, started at lab parameter ``s_lo`` (module docstring)."""
-    u = seg.u
-    g = seg.gamma
-    dt = t - seg.t_ref
-    dx = x + (lab_origin - seg.p_ref)
-    x_u = dx + (g * g / (g + 1.0)) * (dx @ u)[:, None] * u - g * dt[:, None] * u
-    d64 = d.astype(np.float64)
-    k = np.asarray(relativity.doppler_factor_lab(d64, u), np.float64).reshape(-1)
-    d_u = relativity.aberrate_inverse(d64, u)
-    o_u = x_u + (k * s_lo)[:, None] * d_u - accel.origin
-    return _RestRays(np.ascontiguousarray(o_u, np.float32),
-                     np.ascontiguousarray(d_u, np.float32), k, s_lo)
+@njit(cache=True, nogil=True, error_model="numpy")
+def merge_hits(rows, k, s_lo, t_u, prim_u, u_u, v_u, start, seg, best, prim, bu, bv,
+               seg_hit):
+    """Keep each rest-frame hit whose lab parameter s_lo + s_u/k beats the best so far."""
+    for j in range(rows.shape[0]):
+        if prim_u[j] < 0:
+            continue
+        i = rows[j]
+        s = s_lo[j] + t_u[j] / k[j]
+        if s < best[i]:
+            best[i] = s
+            prim[i] = prim_u[j] + start
+            bu[i] = u_u[j]
+            bv[i] = v_u[j]
+            seg_hit[i] = seg
 
 
 class MovingScene:
@@ -78,70 +116,79 @@ class MovingScene:
         self.groups = groups
         self.lab_origin = np.asarray(lab_origin, np.float64)
 
-    def _windows(self, seg: Segment, t: np.ndarray, s_max: np.ndarray):
-        """Lab parameters (s_lo, s_hi) of the part of each ray that sees ``seg``."""
-        s_lo = np.maximum(0.0, t - seg.t_hi)
-        s_hi = np.minimum(s_max, t - seg.t_lo)
-        return s_lo, s_hi
+    @staticmethod
+    def _buffers(buf: dict, n: int) -> dict:
+        """Arrays for ``n`` rays, kept in ``buf`` across calls (fresh multi-MB arrays cost
+        a page fault per 4 KiB, with the GIL held)."""
+        if buf.get("n", -1) < n:
+            buf.clear()
+            buf.update(n=n, rows=np.empty(n, np.int64), o=np.empty((n, 3), np.float32),
+                       d=np.empty((n, 3), np.float32), k=np.empty(n), s_lo=np.empty(n),
+                       tmax=np.empty(n, np.float32), best=np.empty(n), seg=np.empty(n, np.int32),
+                       prim=np.empty(n, np.int32), u=np.empty(n, np.float32),
+                       v=np.empty(n, np.float32), blocked=np.empty(n, bool))
+        return buf
 
-    def intersect(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> Hits:
+    def _rest_rays(self, group: GroupAccel, seg: Segment, o, d, t, best, buf: dict):
+        """:func:`rest_rays` of ``seg`` into the buffers ``buf``."""
+        acc = group.accel
+        b = float(np.linalg.norm(seg.u))
+        m = rest_rays(o, d, t, best, seg.u / b if b > 0.0 else np.zeros(3), b,
+                      1.0 / seg.gamma, seg.t_ref, seg.p_ref - self.lab_origin, seg.t_lo,
+                      seg.t_hi, acc.origin, acc.bound_radius, buf["rows"], buf["o"],
+                      buf["d"], buf["k"], buf["s_lo"], buf["tmax"])
+        return (buf["rows"][:m], buf["o"][:m], buf["d"][:m], buf["k"][:m], buf["s_lo"][:m],
+                buf["tmax"][:m])
+
+    def intersect(self, o: np.ndarray, d: np.ndarray, t: np.ndarray,
+                  buffers: dict | None = None) -> Hits:
         """Nearest hits of lab rays (accelerator-local origins ``o``, unit ``d``, origin
-        lab times ``t``): t is the lab distance, ``seg`` the segment hit (-1 static)."""
+        lab times ``t``): t is the lab distance, ``seg`` the segment hit (-1 static).
+        ``buffers``: a dict the caller keeps per concurrent batch; the returned arrays
+        live in it until the next call."""
         n = len(o)
+        buf = self._buffers({} if buffers is None else buffers, n)
+        best, prim, bu, bv = buf["best"][:n], buf["prim"][:n], buf["u"][:n], buf["v"][:n]
         if self.static is not None:
             h = self.static.intersect(o, d)
-            best, prim = h.t.astype(np.float64), h.prim.copy()
-            bu, bv = h.u.copy(), h.v.copy()
+            best[:], prim[:], bu[:], bv[:] = h.t, h.prim, h.u, h.v
         else:
-            best = np.full(n, float(MISS_DISTANCE))
-            prim = np.full(n, -1, np.int32)
-            bu, bv = np.zeros(n, np.float32), np.zeros(n, np.float32)
-        seg_hit = np.full(n, -1, np.int32)
-        if n == 0:
-            return Hits(best.astype(np.float32), prim, bu, bv, seg_hit)
-        x = o.astype(np.float64)
-        t = np.asarray(t, np.float64)
+            best[:], prim[:], bu[:], bv[:] = MISS_DISTANCE, -1, 0.0, 0.0
+        seg_hit = buf["seg"][:n]
+        seg_hit[:] = -1
         for group in self.groups:
             for j, seg in enumerate(group.segments):
-                s_lo, s_hi = self._windows(seg, t, best)
-                live = np.flatnonzero(s_hi > s_lo)
-                if len(live) == 0:
+                rows, o_u, d_u, k, s_lo, tmax = self._rest_rays(group, seg, o, d, t, best, buf)
+                if len(rows) == 0:
                     continue
-                r = rest_rays(seg, group.accel, self.lab_origin, x[live], d[live], t[live],
-                              s_lo[live])
-                hu = group.accel.intersect(r.o, r.d, tmax=r.k * (s_hi[live] - s_lo[live]))
-                ok = hu.prim >= 0
-                s_lab = r.s_lo + hu.t.astype(np.float64) / r.k
-                ok &= s_lab < best[live]
-                rows = live[ok]
-                best[rows] = s_lab[ok]
-                prim[rows] = hu.prim[ok] + group.start
-                bu[rows], bv[rows] = hu.u[ok], hu.v[ok]
-                seg_hit[rows] = group.first_segment + j
+                hu = group.accel.intersect(o_u, d_u, tmax=tmax)
+                merge_hits(rows, k, s_lo, hu.t, hu.prim, hu.u, hu.v, group.start,
+                           group.first_segment + j, best, prim, bu, bv, seg_hit)
         return Hits(best.astype(np.float32), prim, bu, bv, seg_hit)
 
-    def occluded(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray,
-                 t: np.ndarray) -> np.ndarray:
+    def occluded(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray, t: np.ndarray,
+                 buffers: dict | None = None) -> np.ndarray:
         """True where the lab segment from event (``t``, ``o``) along ``d``, 0 < s < tmax,
         is blocked by the static scene or by a moving object at the time it is there."""
         n = len(o)
-        blocked = (self.static.occluded(o, d, tmax) if self.static is not None
-                   else np.zeros(n, bool))
-        if n == 0:
-            return blocked
-        x = o.astype(np.float64)
-        t = np.asarray(t, np.float64)
-        s_max = np.asarray(tmax, np.float64)
+        buf = self._buffers({} if buffers is None else buffers, n)
+        blocked = buf["blocked"][:n]
+        if self.static is not None:
+            blocked[:] = self.static.occluded(o, d, tmax)
+        else:
+            blocked[:] = False
+        # a blocked ray's remaining length is 0: no segment tests it again
+        s_max = buf["best"][:n]
+        s_max[:] = tmax
+        s_max[blocked] = 0.0
         for group in self.groups:
             for seg in group.segments:
-                s_lo, s_hi = self._windows(seg, t, s_max)
-                live = np.flatnonzero((s_hi > s_lo) & ~blocked)
-                if len(live) == 0:
+                rows, o_u, d_u, _, _, length = self._rest_rays(group, seg, o, d, t, s_max, buf)
+                if len(rows) == 0:
                     continue
-                r = rest_rays(seg, group.accel, self.lab_origin, x[live], d[live], t[live],
-                              s_lo[live])
-                blocked[live] |= group.accel.occluded(r.o, r.d,
-                                                      r.k * (s_hi[live] - s_lo[live]))
+                hit = rows[group.accel.occluded(o_u, d_u, length)]
+                blocked[hit] = True
+                s_max[hit] = 0.0
         return blocked
 
     def segment_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,108 @@
+"""What moving objects cost: CPU time per sample against the number of velocity groups.
+
+The same Cornell box geometry is rendered with its non-emitting triangles split into
+N = 0, 1, 2, 4, 8 velocity groups (0: everything static, today's path; N ≥ 1: each group
+a BVH of its own, traced in its rest frame, :mod:`relray.core.render.rest_frames`). The
+groups move slowly (|u| = 1e-4 in eight directions), so the picture, the paths and the
+rays are the same and only the cost of tracing several frames shows. A second variant
+moves only the tall box (a small moving object in a static room, the common case).
+Runs are interleaved over the variants and reduced to medians of CPU time per spp;
+the ratio is against N = 0 in the same run.
+
+    .venv/bin/python -m relray.bench.velocity_groups [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from typing import Any
+
+import numpy as np
+
+from relray.bench import common as cm
+from relray.core.scene.geometry import Scene, scene_from_parts
+from relray.core.scene.worldlines import Segment, VelocityGroup
+
+COUNTS = (0, 1, 2, 4, 8)
+SLOW = 1e-4
+DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0],
+                       [0, 0, -1], [0.6, 0.8, 0], [0, 0.6, 0.8]], np.float64)
+
+
+def grouped_scene(scene: Scene, groups: int, only: np.ndarray | None = None) -> Scene:
+    """``scene`` with its non-emitting triangles (or those in ``only``) dealt into
+    ``groups`` contiguous velocity groups, each moving slowly with its frame origin at
+    the lab origin at t = 0 (so its rest-frame coordinates are its lab ones)."""
+    if groups == 0:
+        return scene
+    emitting = np.array([m.emission_strength > 0 and any(m.emission)
+                         for m in scene.materials])[scene.material_ids]
+    movable = ~emitting if only is None else only & ~emitting
+    rows = np.flatnonzero(movable)
+    tri_group = np.zeros(len(scene.triangles), np.int32)
+    for g, part in enumerate(np.array_split(rows, groups), start=1):
+        tri_group[part] = g
+    segs = tuple(VelocityGroup((Segment(SLOW * DIRECTIONS[g % 8], 0.0, np.zeros(3)),))
+                 for g in range(groups))
+    return scene_from_parts(scene.triangles, scene.normals, scene.material_ids,
+                            scene.materials, scene.lights, scene.background, scene.camera,
+                            tri_group=tri_group, groups=segs)
+
+
+def tall_box(scene: Scene) -> np.ndarray:
+    """The triangles of the Cornell box's tall block (the highest non-wall geometry)."""
+    tris = scene.triangles
+    inner = np.all(np.abs(tris[..., :2]) < 0.99, axis=(1, 2)) & np.all(
+        tris[..., 2] < 1.99, axis=1)
+    centre_x = tris[..., 0].mean(axis=1)
+    return inner & (centre_x < 0.0)
+
+
+def group_rows(spp: int, width: int, height: int, threads: int,
+               repeat: int) -> list[dict[str, Any]]:
+    """CPU seconds per spp per variant (medians of interleaved runs), and the ratio to
+    the static scene."""
+    base = cm.RelrayBench(cm.make_job(cm.job_dict()))
+    variants = {f"{n} groups": grouped_scene(base.scene, n) for n in COUNTS}
+    variants["1 group: the tall box"] = grouped_scene(base.scene, 1, tall_box(base.scene))
+    benches = {k: cm.RelrayBench(base.job, scene=s) for k, s in variants.items()}
+    frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
+           for k, b in benches.items()}
+    images = {}
+    for k, b in benches.items():
+        b.render(renderer=frs[k])  # warm-up
+    times: dict[str, list[float]] = {k: [] for k in benches}
+    for _ in range(repeat):
+        for k, b in benches.items():
+            r = b.render(renderer=frs[k])
+            times[k].append(r.cpu / spp)
+            images[k] = r.rgb
+    static = statistics.median(times["0 groups"])
+    ref = images["0 groups"]
+    rows = []
+    for k in benches:
+        t = statistics.median(times[k])
+        prep = benches[k].prep("cie1931")
+        rows.append({"variant": k, "groups": len(prep.scene.groups),
+                     "moving_triangles": len(prep.scene.triangles) - prep.scene.n_static,
+                     "cpu_per_spp_s": t, "over_static": t / static,
+                     "mean_abs_diff": float(np.abs(images[k] - ref).mean() / ref.mean()),
+                     "spp": spp, "width": width, "height": height, "threads": threads,
+                     "repeat": repeat})
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true")
+    a = ap.parse_args(argv)
+    cm.warm_up()
+    size, spp, repeat = (64, 4, 2) if a.quick else (128, 16, 5)
+    for r in group_rows(spp, size, size, 2, repeat):
+        print(f"{r['variant']:>24}: {1e3 * r['cpu_per_spp_s']:7.2f} ms/spp  "
+              f"{r['over_static']:.2f}x  image diff {r['mean_abs_diff']:.4f}")
+
+
+if __name__ == "__main__":
+    main()
