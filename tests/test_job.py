@@ -255,8 +255,35 @@ BAD_JOBS = [
      'file = "nothere.obj"\nmaterial = "w"\n', "objects[0].file", "not found"),
     ("mesh file type", '[[materials]]\nname = "w"\n[[objects]]\nshape = "mesh"\n'
      'file = "model.fbx"\nmaterial = "w"\n', "objects[0].file", ".obj"),
-    ("object velocity", SCENE.replace("radius = 0.5", "radius = 0.5\nvelocity = [0.1, 0, 0]"),
-     "objects[0].velocity", "not supported yet"),
+    ("velocity and worldline", SCENE.replace(
+        "radius = 0.5", "radius = 0.5\nvelocity = [0.1, 0, 0]\n"
+        "worldline = { t = [0, 1], pivot = [[0, 0, 1], [0.5, 0, 1]] }"),
+     "objects[0].worldline", "not both"),
+    ("worldline of one sample", SCENE.replace(
+        "radius = 0.5", "radius = 0.5\nworldline = { t = [0], pivot = [[0, 0, 1]] }"),
+     "objects[0].worldline.t", "2 to 4096"),
+    ("worldline times not increasing", SCENE.replace(
+        "radius = 0.5", "radius = 0.5\n"
+        "worldline = { t = [0, 2, 2], pivot = [[0, 0, 1], [0.5, 0, 1], [1, 0, 1]] }"),
+     "objects[0].worldline.t", "strictly increasing"),
+    ("worldline counts differ", SCENE.replace(
+        "radius = 0.5", "radius = 0.5\n"
+        "worldline = { t = [0, 2, 3], pivot = [[0, 0, 1], [0.5, 0, 1]] }"),
+     "objects[0].worldline.pivot", "one per time"),
+    ("worldline segment at c", SCENE.replace(
+        "radius = 0.5", "radius = 0.5\n"
+        "worldline = { t = [0, 2, 3], pivot = [[0, 0, 1], [0.5, 0, 1], [0.5, 1, 1]] }"),
+     "objects[0].worldline.pivot", "segment 1 (t = 2 .. 3) moves at 1 c"),
+    ("worldline nan", SCENE.replace(
+        "radius = 0.5", "radius = 0.5\n"
+        "worldline = { t = [0, nan], pivot = [[0, 0, 1], [0.5, 0, 1]] }"),
+     "objects[0].worldline.t", "finite, not nan (at [1])"),
+    ("worldline unknown key", SCENE.replace(
+        "radius = 0.5", "radius = 0.5\n"
+        "worldline = { t = [0, 1], pivot = [[0, 0, 1], [0.5, 0, 1]], u = 1 }"),
+     "objects[0].worldline.u", "unknown"),
+    ("pivot inf", SCENE.replace("radius = 0.5", "radius = 0.5\npivot = [0, inf, 0]"),
+     "objects[0].pivot", "finite, not inf (at [1])"),
     ("object velocity above c", SCENE.replace("radius = 0.5", "radius = 0.5\nvelocity = [1, 0, 0]"),
      "objects[0].velocity", "speed of light"),
     ("scene file missing", '[scene]\nfile = "nothere.glb"\n', "scene.file", "not found"),
@@ -592,3 +619,48 @@ def test_area_light_up_is_stored_perpendicular_and_unit(tmp_path: Path) -> None:
     assert not light.up.flags.writeable
     assert job.light_from_dict({"type": "area"}).up is None  # the shortest-arc default
 
+
+
+def test_moving_objects_resolve_their_pivots_and_worldlines(tmp_path: Path) -> None:
+    """The pivot defaults to a sphere's or box's center, a quad's mean corner, a mesh's
+    translate; a worldline keeps its samples; static objects have zero velocity."""
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    text = """
+[[materials]]
+name = "w"
+[[objects]]
+shape = "sphere"
+center = [1.0, 2.0, 3.0]
+radius = 0.5
+material = "w"
+velocity = [0.5, 0, 0]
+[[objects]]
+shape = "box"
+center = [4.0, 0.0, 1.0]
+size = 1.0
+material = "w"
+velocity = [0.5, 0, 0]
+pivot = [9.0, 9.0, 9.0]
+[[objects]]
+shape = "quad"
+corners = [[0, 0, 0], [2, 0, 0], [2, 0, 2], [0, 0, 2]]
+material = "w"
+worldline = { t = [0.0, 4.0, 8.0], pivot = [[0, 0, 1], [2, 0, 1], [2, 3, 1]] }
+[[objects]]
+shape = "mesh"
+file = "m.obj"
+translate = [0.0, 5.0, 0.0]
+material = "w"
+"""
+    j = job.load_job(write_job(tmp_path, text))
+    sphere, box, quad, mesh = j.scene.objects
+    np.testing.assert_array_equal(sphere.pivot, [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(box.pivot, [9.0, 9.0, 9.0])
+    np.testing.assert_array_equal(quad.pivot, [1.0, 0.0, 1.0])
+    np.testing.assert_array_equal(mesh.pivot, [0.0, 5.0, 0.0])
+    assert sphere.worldline is None and not np.any(mesh.velocity)
+    np.testing.assert_array_equal(quad.worldline.t, [0.0, 4.0, 8.0])
+    np.testing.assert_array_equal(quad.worldline.pivot[2], [2.0, 3.0, 1.0])
+    summary = job.job_summary(j)
+    assert "velocity group 1" in summary and "velocity group 2" in summary
+    assert "segment 1: u (0, 0.75, 0)" in summary and "gamma 1.1547" in summary

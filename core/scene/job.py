@@ -67,7 +67,7 @@ import numpy as np
 from .. import resources
 from ..errors import UserError
 from ..files import MAX_TEXT_BYTES, check_readable, read_input, resolve_path
-from . import gltf, schema, shapes
+from . import gltf, schema, shapes, worldlines
 from .description import (
     CameraSettings,
     Job,
@@ -78,6 +78,7 @@ from .description import (
     OutputSettings,
     RenderSettings,
     SceneSpec,
+    Worldline,
     frozen,
 )
 from .footprint import check_memory
@@ -362,8 +363,6 @@ def _object(o: schema.Object, ctx: _Ctx, materials: Sequence[str], job_dir: Path
         close = difflib.get_close_matches(o.material, materials, n=1, cutoff=0.5)
         hint = f" (did you mean '{close[0]}'?)" if close else ""
         raise ctx.error("material", f"material '{o.material}' is not defined{hint}")
-    if any(v != 0.0 for v in o.velocity):
-        raise ctx.error("velocity", "objects with their own velocity are not supported yet")
     params: dict[str, Any]
     if isinstance(o, schema.Sphere):
         params = {"center": frozen(o.center), "radius": o.radius,
@@ -384,8 +383,45 @@ def _object(o: schema.Object, ctx: _Ctx, materials: Sequence[str], job_dir: Path
                   "rotation_z": o.rotation_z,
                   "up": o.up if given(o, "up") else ("y" if is_gltf else "z"),
                   "smooth": o.smooth}
+    worldline = _worldline(o, ctx)
     return ObjectSpec(name=o.name if given(o, "name") else ctx.prefix, shape=o.shape,
-                      material=o.material, params=params, velocity=frozen(o.velocity))
+                      material=o.material, params=params, velocity=frozen(o.velocity),
+                      pivot=frozen(o.pivot if given(o, "pivot") else default_pivot(o.shape,
+                                                                                   params)),
+                      worldline=worldline)
+
+
+def default_pivot(shape: str, params: dict[str, Any]) -> np.ndarray:
+    """An object's pivot unless given: a sphere's or box's center, the mean of a quad's
+    corners, a mesh's translate (job-format.md, "Moving objects")."""
+    if shape in ("sphere", "box"):
+        return np.asarray(params["center"], np.float64)
+    if shape == "quad":
+        return np.asarray(params["corners"], np.float64).mean(axis=0)
+    return np.asarray(params["translate"], np.float64)
+
+
+def _worldline(o: schema.Object, ctx: _Ctx) -> Worldline | None:
+    """The worldline's rules across keys: not with a velocity, one position per time,
+    every segment below c."""
+    w = o.worldline
+    if w is None:
+        return None
+    if any(v != 0.0 for v in o.velocity):
+        raise ctx.error("worldline", "give either velocity or worldline, not both")
+    wctx = ctx.sub("worldline")
+    if len(w.pivot) != len(w.t):
+        raise wctx.error("pivot", f"has {len(w.pivot)} positions for {len(w.t)} times "
+                                  "(one per time)")
+    t, p = np.array(w.t, np.float64), np.array(w.pivot, np.float64)
+    speed = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.diff(t)
+    fast = np.flatnonzero(~(speed < 1.0))
+    if len(fast):
+        k = int(fast[0])
+        raise wctx.error("pivot", f"segment {k} (t = {t[k]:g} .. {t[k + 1]:g}) moves at "
+                                  f"{speed[k]:.6g} c: every segment must be slower than "
+                                  "light (c = 1)")
+    return Worldline(frozen(t), frozen(p))
 
 
 def _existing_file(text: str, ctx: _Ctx, name: str, base: Path, suffixes: Sequence[str]) -> Path:
@@ -698,6 +734,19 @@ def _fmt_vec(v: Iterable[float]) -> str:
     return "(" + ", ".join(f"{float(x):.4g}" for x in v) + ")"
 
 
+def _motion_lines(obj: ObjectSpec, group: int, vg: worldlines.VelocityGroup) -> list[str]:
+    """``relray info``'s lines on a moving object: its pivot, velocity group and each
+    inertial segment's velocity u, γ and emission-time window."""
+    lines = [f"    moving  pivot {_fmt_vec(obj.pivot)}, velocity group {group}"]
+    for k, seg in enumerate(vg.segments):
+        one = len(vg.segments) == 1
+        window = "" if one else f", light emitted at t in [{seg.t_lo:g}, {seg.t_hi:g})"
+        label = "u" if one else f"segment {k}: u"
+        lines.append(f"    {label} {_fmt_vec(seg.u)}, |u| {np.linalg.norm(seg.u):.6g}, "
+                     f"gamma {seg.gamma:.6g}{window}")
+    return lines
+
+
 def job_summary(job: Job) -> str:
     """Readable multi-line description of a job (for ``relray info``)."""
     r, o, m, s = job.render, job.output, job.motion, job.scene
@@ -745,8 +794,11 @@ def job_summary(job: Job) -> str:
     )
     for inc in s.includes:
         lines.append(f"  include   {inc}")
-    for obj in s.objects:
+    index, groups, _ = worldlines.rest_frame_offsets(list(s.objects))
+    for obj, g in zip(s.objects, index, strict=True):
         lines.append(f"  object    {obj.name}: {obj.shape}, material {obj.material}")
+        if g:
+            lines += _motion_lines(obj, g, groups[g - 1])
     for light in s.lights:
         unit = "W/m^2" if light.type == "sun" else "W"
         lines.append(f"  light     {light.name or '-'}: {light.type}, {light.power:g} {unit}")

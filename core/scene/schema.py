@@ -90,6 +90,8 @@ MAX_FRAME_NUMBER = 2**31 - 1
 MAX_SEED = 2**63 - 1
 MAX_SPP = 2**24
 MAX_DEPTH = 1024
+#: Samples of an object's worldline (each segment is a BVH traversal per ray and bounce).
+MAX_WORLDLINE_SAMPLES = 4096
 MAX_THREADS = 65536
 #: Gaussian emission lines: centre inside the spectral grid (spectrum.GRID_MIN_NM ..
 #: GRID_MAX_NM) and sigma >= MIN_LINE_SIGMA_REL x centre (narrower ones have no area on it).
@@ -480,6 +482,27 @@ class Material(Table):
                                                         "(v1-v0)×(v2-v0).")
 
 
+def _strictly_increasing(v: list[float]) -> list[float]:
+    if any(b <= a for a, b in zip(v, v[1:], strict=False)):
+        raise _fail("must be strictly increasing")
+    return v
+
+
+class Worldline(Table):
+    """An object's ``worldline``: the pivot's piecewise-linear lab worldline."""
+
+    what: ClassVar[str] = "in a worldline"
+    needs: ClassVar[str] = "a worldline needs t and pivot"
+    t: Annotated[list[Number], Field(min_length=2, max_length=MAX_WORLDLINE_SAMPLES),
+                 AfterValidator(_strictly_increasing),
+                 Expect(f"an array of 2 to {MAX_WORLDLINE_SAMPLES} lab times")] = Field(
+        description="Lab times (ct, scene units), strictly increasing, at least 2.")
+    pivot: Annotated[list[Vec3], Field(min_length=2, max_length=MAX_WORLDLINE_SAMPLES),
+                     Expect("an array of [x, y, z] positions")] = Field(
+        description="The pivot's lab position at each time; every segment slower than "
+                    "light; the first and last segments' velocities hold before and after.")
+
+
 class Object(Table):
     """``[[objects]]``: keys every shape takes."""
 
@@ -488,7 +511,15 @@ class Object(Table):
     material: Annotated[Str, Msg(missing="every object needs a material")] = Field(
         description="A material's name.")
     velocity: _vec(3, Number, AfterValidator(_below_c("velocity"))) = Field(
-        [0.0, 0.0, 0.0], description="Own lab velocity, |velocity| < 1 (must be 0 for now).")
+        [0.0, 0.0, 0.0], description="Own constant lab velocity, |velocity| < 1; the shape "
+                                     "is given in the object's rest frame about its pivot.")
+    pivot: Vec3 = Field(
+        None, description="The point at `pivot` at lab time 0 (the origin of the object's "
+                          "rest frame); default: a sphere's or box's center, a quad's mean "
+                          "corner, a mesh's translate.")
+    worldline: Worldline = Field(
+        None, description="{t, pivot}: the pivot's piecewise-linear lab worldline; replaces "
+                          "velocity.")
 
 
 class Sphere(Object):
