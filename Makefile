@@ -66,7 +66,7 @@ stress: $(STAMP)
 	@test -x /usr/bin/time || echo "note: /usr/bin/time missing, memory read with getrusage"
 	RELRAY_STRESS=1 $(BIN)/python -m pytest -q -m stress -s -p no:cacheprovider
 
-## make gallery: the seed report's figures, rendered into docs/gallery
+## make gallery: the seed report's figures and the moving objects (presets/moving), rendered into docs/gallery
 gallery: $(STAMP)
 	$(BIN)/python docs/gallery.py
 

@@ -316,7 +316,7 @@ def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
         f"`.venv/bin/python -m relray.bench.report --out "
         f"{os.path.relpath(out.resolve(), cm.REPO)}`.\n")
     la = mach.get("load_average", [math.nan] * 3)
-    add("| machine | |\n|---|---|")
+    add("| machine (of the last run; each section's CPU is in the table below) | |\n|---|---|")
     add(f"| CPU | {mach.get('cpu', '?')}, {mach.get('cores', '?')} cores, "
         f"{mach.get('memory', '?')} |")
     add(f"| OS, Python | {mach.get('os', '?')}, Python {mach.get('python', '?')} |")
@@ -337,7 +337,7 @@ def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
         "CPU time (process CPU clock; stage times from per-thread CPU clocks), which the "
         "other processes disturb much less.\n")
     add(table([{"s": k, **v} for k, v in secs.items()], [
-        ("section", "s", ""), ("run at", "date", ""),
+        ("section", "s", ""), ("run at", "date", ""), ("CPU", lambda r: r.get("cpu", "–"), ""),
         ("load before", lambda r: r["load_before"][0], ".2f"),
         ("load after", lambda r: r.get("load_after", [math.nan])[0], ".2f"),
         ("seconds", "seconds", ".0f")]))

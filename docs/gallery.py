@@ -1,12 +1,15 @@
-"""Render the README's gallery: the seed report's figures and the fly-by contact sheet.
+"""Render the README's gallery: the seed report's figures, the moving objects and the
+fly-by contact sheet.
 
-    .venv/bin/python docs/gallery.py [--spp N]
+    .venv/bin/python docs/gallery.py [--spp N] [--only seed,moving]
 
 Renders every job in presets/seed_figures/ (into out/seed_figures/) and writes
 docs/gallery/seed_figures.png, a captioned contact sheet.  Then it renders the Doppler
 figures 2-3 ... 2-18 again with relray's physics (CIE 1931 sensor, Jakob-Hanika spectra,
 Doppler and the D^5 searchlight) into docs/gallery/seed_figures_physical.png, and writes
-docs/gallery/flyby.png from out/flyby/ when `make demo` has rendered it.
+docs/gallery/flyby.png from out/flyby/ when `make demo` has rendered it. The moving
+objects' presets (presets/moving/) give one chosen frame each to
+docs/gallery/moving.png.
 """
 
 from __future__ import annotations
@@ -58,14 +61,44 @@ def sheet(jobs: list[Path], spp: int | None, name: str, physical: bool) -> None:
                               captions=captions))
 
 
+#: The frame of each moving preset that the gallery shows, and its caption.
+MOVING = (("terrell", 7, "0.9 c past a camera at rest: the sphere stays round"),
+          ("ships", 7, "ship B closing at 0.9 c, seen from ship A"),
+          ("mirror", 8, "mirrors at rest (left) and receding at 0.1 c"),
+          ("train", 12, "a train at 0.8 c: colour changes along it"))
+
+
+def moving_sheet(spp: int | None) -> None:
+    """One frame of each moving preset, tiled into docs/gallery/moving.png."""
+    pngs, captions = [], []
+    for name, frame, text in MOVING:
+        job = jobmod.with_overrides(jobmod.load_job(ROOT / "presets" / "moving" /
+                                                    f"{name}.toml"), spp=spp)
+        first = job.motion.frames[0]
+        motion = dataclasses.replace(job.motion, frames=(frame, frame),
+                                     ct=job.motion.ct + (frame - first) * job.motion.ct_per_frame)
+        job = dataclasses.replace(job, motion=motion)
+        render_job(job, overwrite=True, show_progress=False)
+        pngs.append(job.output.dir / f"{job.output.name.format(frame=frame)}.png")
+        captions.append(text)
+        print(pngs[-1])
+    print(write_contact_sheet(pngs, ROOT / "docs" / "gallery" / "moving.png", columns=2,
+                              captions=captions))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=None)
+    ap.add_argument("--only", default="seed,moving", help="seed, moving or both")
     args = ap.parse_args()
-    jobs = sorted((ROOT / "presets" / "seed_figures").glob("fig*.toml"), key=figure_key)
-    sheet(jobs, args.spp, "seed_figures", physical=False)
-    doppler_figs = [p for p in jobs if figure_key(p)[0] == 2 and figure_key(p)[1] >= 3]
-    sheet(doppler_figs, args.spp, "seed_figures_physical", physical=True)
+    parts = set(args.only.split(","))
+    if "seed" in parts:
+        jobs = sorted((ROOT / "presets" / "seed_figures").glob("fig*.toml"), key=figure_key)
+        sheet(jobs, args.spp, "seed_figures", physical=False)
+        doppler = [p for p in jobs if figure_key(p)[0] == 2 and figure_key(p)[1] >= 3]
+        sheet(doppler, args.spp, "seed_figures_physical", physical=True)
+    if "moving" in parts:
+        moving_sheet(args.spp)
     flyby = sorted((ROOT / "out" / "flyby").glob("frame_*.png"))
     if flyby:
         print(write_contact_sheet(flyby[::3], ROOT / "docs" / "gallery" / "flyby.png",

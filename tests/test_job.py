@@ -536,6 +536,7 @@ def test_presets_exist() -> None:
     figures |= {f"seed_figures/fig2-{i}.toml" for i in range(1, 19)}
     assert figures <= names
     assert len([n for n in names if n.startswith("motion/")]) >= 2
+    assert {f"moving/{n}.toml" for n in ("terrell", "ships", "mirror", "train")} <= names
 
 
 @pytest.mark.parametrize("path", PRESETS, ids=lambda p: p.relative_to(ROOT / "presets").as_posix())
@@ -561,6 +562,20 @@ def test_seed_figure_axis_mapping() -> None:
     assert fig22.spectral == "seed-gaussian" and not fig22.searchlight
     fig27 = job.load_job(figures / "fig2-7.toml").render
     assert fig27.spectral == "seed-gaussian" and not fig27.searchlight
+
+
+def test_moving_presets_move_what_they_say() -> None:
+    """The gallery's moving presets: each has moving objects in the groups it describes."""
+    from relray.core.scene import worldlines
+
+    speeds = {"terrell": {0.9}, "ships": {0.63}, "mirror": {0.1}, "train": {0.8}}
+    groups = {"terrell": 1, "ships": 2, "mirror": 1, "train": 1}
+    for name, expect in speeds.items():
+        j = job.load_job(ROOT / "presets" / "moving" / f"{name}.toml")
+        index, gs, _ = worldlines.rest_frame_offsets(list(j.scene.objects))
+        assert len(gs) == groups[name], name
+        got = {round(float(np.linalg.norm(g.segments[0].u)), 6) for g in gs}
+        assert got == expect, name
 
 
 def test_flyby_preset() -> None:
