@@ -134,6 +134,10 @@ CHANGES = {
     "velocity": ("beta = [0.3, 0.0, 0.0]", "beta = [0.31, 0.0, 0.0]"),
     "motion start": ("[motion]", "[motion]\nct = 1.0"),
     "geometry": ("radius = 0.6", "radius = 0.61"),
+    "an object's velocity": ("radius = 0.6", "radius = 0.6\nvelocity = [0.0, 0.0, 1e-9]"),
+    "an object's pivot": ("radius = 0.6", "radius = 0.6\npivot = [0.0, 0.0, 1.001]"),
+    "an object's worldline": ("radius = 0.6", "radius = 0.6\n"
+                              "worldline = { t = [0.0, 1.0], pivot = [[0, 0, 1], [0, 0, 1]] }"),
     "mesh transform": ('file = "m.obj"', 'file = "m.obj"\ntranslate = [0.0, 0.0, 0.1]'),
     "material value": ("roughness = 0.3", "roughness = 0.31"),
     "material of an object": ('material = "ball"', 'material = "lamp"'),
