@@ -547,3 +547,88 @@ def test_fuzzed_documents_are_loaded_or_refused(tmp_path_factory, edits) -> None
 @_fuzz
 def test_fuzzed_documents_are_loaded_or_refused_long(tmp_path_factory, edits) -> None:
     _fuzz_one(tmp_path_factory.mktemp("g"), edits)
+
+
+# ------------------------------------------------------------ moving nodes (extras.relray)
+
+def moving_doc(relray: dict | None, translation=(0.0, 0.0, -5.0)) -> dict:
+    """Two nodes of the one-triangle mesh: node 0 static, node 1 with ``extras.relray``."""
+    doc = tri_doc(2)
+    doc["nodes"][1]["translation"] = list(translation)
+    if relray is not None:
+        doc["nodes"][1]["extras"] = {"relray": relray, "blender": "ignored"}
+    return doc
+
+
+def test_a_node_with_a_velocity_is_a_moving_object_in_z_up_axes(tmp_path: Path) -> None:
+    """glTF's (x, y, z) velocity is relray's (x, -z, y), like a point; the pivot defaults
+    to the node's world translation; the node's triangles are tagged with its motion."""
+    import json
+
+    path = tmp_path / "s.gltf"
+    path.write_text(json.dumps(moving_doc({"velocity": [0.1, 0.2, 0.3]})))
+    gl = gltf.load_gltf_scene(path)
+    assert gl.tri_motion.tolist() == [-1, 0] and len(gl.motions) == 1
+    m = gl.motions[0]
+    np.testing.assert_allclose(m.velocity, [0.1, -0.3, 0.2])
+    np.testing.assert_allclose(m.pivot, [0.0, 5.0, 0.0])
+    assert m.worldline is None and m.where == "nodes[1]"
+    assert len(gltf.load_gltf(path)) == 6  # the static reader's result is unchanged
+
+
+def test_a_node_worldline_and_pivot_convert_axes(tmp_path: Path) -> None:
+    import json
+
+    path = tmp_path / "s.gltf"
+    path.write_text(json.dumps(moving_doc(
+        {"pivot": [1.0, 2.0, 3.0],
+         "worldline": {"t": [0.0, 10.0], "pivot": [[0, 0, 0], [0, 0, -5.0]]}})))
+    m = gltf.load_gltf_scene(path).motions[0]
+    np.testing.assert_allclose(m.pivot, [1.0, -3.0, 2.0])
+    np.testing.assert_allclose(m.worldline.pivot, [[0, 0, 0], [0, 5.0, 0]])
+    np.testing.assert_allclose(m.worldline.t, [0.0, 10.0])
+
+
+def test_a_zero_velocity_node_is_static(tmp_path: Path) -> None:
+    import json
+
+    path = tmp_path / "s.gltf"
+    path.write_text(json.dumps(moving_doc({"velocity": [0, 0, 0]})))
+    gl = gltf.load_gltf_scene(path)
+    assert gl.motions == [] and gl.tri_motion.tolist() == [-1, -1]
+
+
+@pytest.mark.parametrize(("relray", "words"), [
+    ({"velocity": [0.8, 0.7, 0.0]}, "nodes[1].extras.relray.velocity: |velocity| = 1.06"),
+    ({"velocity": [0.1, "x", 0.0]}, "velocity must be an array of 3 numbers"),
+    ({"speed": 0.5}, "unknown key 'speed'"),
+    ("fast", "nodes[1].extras.relray must be an object"),
+    ({"velocity": [0.1, 0, 0], "worldline": {"t": [0, 1], "pivot": [[0, 0, 0], [0, 0, 0]]}},
+     "either velocity or worldline"),
+    ({"worldline": {"t": [0], "pivot": [[0, 0, 0]]}}, "at least 2 numbers"),
+    ({"worldline": {"t": [0, 0], "pivot": [[0, 0, 0], [0, 0, 0]]}}, "strictly increasing"),
+    ({"worldline": {"t": [0, 1, 2], "pivot": [[0, 0, 0], [0, 0, 0]]}}, "one position per time"),
+    ({"worldline": {"t": [0, 1], "pivot": [[0, 0, 0], [2, 0, 0]]}}, "segment 0 moves at 2 c"),
+    ({"pivot": [0, 1e20, 0]}, "pivot must be finite and within ±1e+15"),
+])
+def test_bad_node_motion_is_one_error_naming_scene_file(tmp_path: Path, relray, words) -> None:
+    with pytest.raises(UserError) as err:
+        load_doc(tmp_path, moving_doc(relray))
+    assert err.value.key == "scene.file" and words in str(err.value), str(err.value)
+
+
+def test_a_moving_gltf_node_renders_in_its_own_velocity_group(tmp_path: Path) -> None:
+    """build_scene: the static node stays in the lab group, the moving one gets a group
+    with its own velocity and its triangles in its rest frame (about its pivot)."""
+    import json
+
+    (tmp_path / "s.gltf").write_text(json.dumps(moving_doc({"velocity": [0.5, 0, 0]})))
+    (tmp_path / "job.toml").write_text('[scene]\nfile = "s.gltf"\n')
+    from relray.core.scene.geometry import build_scene
+
+    scene = build_scene(job.load_job(tmp_path / "job.toml"))
+    assert scene.n_static == 1 and len(scene.groups) == 1
+    np.testing.assert_allclose(scene.groups[0].segments[0].u, [0.5, 0, 0])
+    np.testing.assert_allclose(scene.groups[0].segments[0].p_ref, [0.0, 5.0, 0.0])
+    # node 1's triangle at world (x, -z, y) = (.., 5, ..) sits about its pivot
+    np.testing.assert_allclose(scene.triangles[1][:, 1], 0.0, atol=1e-12)

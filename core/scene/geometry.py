@@ -282,22 +282,29 @@ def build_scene(job: Job) -> Scene:
     camera = None
     named: list[tuple[str, int]] = []
     lighten: dict[str, str] = {}
+    gl = None
     if job.scene.file is not None:
-        tris, norms, mids, mats, gl_lights, camera = gltf.load_gltf(
-            job.scene.file, key="scene.file", job_file=job.path
-        )
-        parts.append(_Part(tris, norms, mids))
-        named.append(("scene.file", len(tris)))
-        materials += mats
-        lights += gl_lights
+        gl = gltf.load_gltf_scene(job.scene.file, key="scene.file", job_file=job.path)
+        camera = gl.camera
+        materials += gl.materials
+        lights += gl.lights
     ids = {m.name: len(materials) + i for i, m in enumerate(job.scene.materials)}
     materials += job.scene.materials
-    group_of, groups, offsets = worldlines.rest_frame_offsets(list(job.scene.objects))
+    # moving glTF nodes (extras.relray) first, then the job's objects: one set of groups
+    node_specs = [ObjectSpec(name=f"scene.file {m.where}", shape="mesh", material="",
+                             params={}, velocity=m.velocity, pivot=m.pivot,
+                             worldline=m.worldline) for m in (gl.motions if gl else [])]
+    group_of, groups, offsets = worldlines.rest_frame_offsets(
+        node_specs + list(job.scene.objects))
+    if gl is not None:
+        parts += _gltf_parts(gl, group_of[:len(node_specs)], offsets[:len(node_specs)])
+        named.append(("scene.file", len(gl.triangles)))
     for i, obj in enumerate(job.scene.objects):
         tris, norms = tessellate(obj, f"objects[{i}]", job.path)
-        if group_of[i]:
-            tris = tris + offsets[i]
-        parts.append(_Part(tris, norms, ids[obj.material], group_of[i]))
+        g = group_of[len(node_specs) + i]
+        if g:
+            tris = tris + offsets[len(node_specs) + i]
+        parts.append(_Part(tris, norms, ids[obj.material], g))
         named.append((f"objects[{i}]", len(tris)))
         if obj.shape == "mesh":
             lighten[f"objects[{i}]"] = f"objects[{i}].file"
@@ -313,6 +320,21 @@ def build_scene(job: Job) -> Scene:
                             [*lights, *job.scene.lights], job.scene.background, camera,
                             file=job.path, named_parts=named, tri_group=tri_group,
                             groups=tuple(groups))
+
+
+def _gltf_parts(gl: gltf.GltfScene, group_of: Sequence[int],
+                offsets: Sequence[np.ndarray]) -> list[_Part]:
+    """The glTF file's triangles as parts: the static ones, then each moving node's in
+    its group's rest-frame coordinates (the node order is kept within each part)."""
+    if not gl.motions:
+        return [_Part(gl.triangles, gl.normals, gl.material_ids)]
+    parts = []
+    for k in range(-1, len(gl.motions)):
+        rows = np.flatnonzero(gl.tri_motion == k)
+        tris = gl.triangles[rows] + (offsets[k] if k >= 0 else 0.0)
+        norms = None if gl.normals is None else gl.normals[rows]
+        parts.append(_Part(tris, norms, gl.material_ids[rows], group_of[k] if k >= 0 else 0))
+    return parts
 
 
 def scene_from_parts(

@@ -33,6 +33,12 @@ no material                                Blender's default: grey 0.8, roughnes
 ``KHR_lights_punctual`` directional        sun, ``power`` = lux / 683 W/m²
 first perspective camera                   :class:`CameraSettings`: ``fov`` = yfov in
 (depth-first node order)                   degrees (vertical); aspectRatio is ignored
+a mesh node's ``extras.relray``            a moving object (job-format.md, "Moving
+= {velocity, pivot, worldline}             objects"): the keys of a job object, in glTF's
+                                           world coordinates (Y up, converted like points);
+                                           ``pivot`` defaults to the node's world
+                                           translation; the node's own mesh moves (not its
+                                           children)
 =========================================  =================================================
 
 The light conversion is the one of Blender's glTF importer in its default
@@ -56,14 +62,21 @@ import math
 import struct
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 from urllib.parse import unquote
 
 import numpy as np
 
 from ..errors import UserError
 from ..files import MAX_BINARY_BYTES, read_input
-from .description import CameraSettings, LightSpec, MaterialSpec
+from .description import (
+    MAX_ABS_NUMBER,
+    CameraSettings,
+    LightSpec,
+    MaterialSpec,
+    Worldline,
+    frozen,
+)
 from .shapes import check_coordinates, face_normals
 
 log = logging.getLogger("relray")
@@ -91,6 +104,32 @@ GltfResult = tuple[
     np.ndarray, np.ndarray | None, np.ndarray, list[MaterialSpec], list[LightSpec],
     CameraSettings | None,
 ]
+#: The keys of a node's ``extras.relray``.
+MOTION_KEYS = ("velocity", "pivot", "worldline")
+
+
+class NodeMotion(NamedTuple):
+    """A moving mesh node: ``where`` ("nodes[3]"), its lab velocity, pivot and worldline
+    (Z-up, lab frame), as a job object's keys."""
+
+    where: str
+    velocity: np.ndarray
+    pivot: np.ndarray
+    worldline: Worldline | None
+
+
+class GltfScene(NamedTuple):
+    """:func:`load_gltf_scene`: the :data:`GltfResult` fields, and per triangle the index
+    of its node's :class:`NodeMotion` in ``motions`` (-1: static)."""
+
+    triangles: np.ndarray
+    normals: np.ndarray | None
+    material_ids: np.ndarray
+    materials: list[MaterialSpec]
+    lights: list[LightSpec]
+    camera: CameraSettings | None
+    tri_motion: np.ndarray
+    motions: list[NodeMotion]
 
 
 class _CorruptError(Exception):
@@ -622,20 +661,97 @@ def load_gltf(
     has normals; material_ids int32 (T,) indexing ``materials``; lights (point, spot,
     sun); the first perspective camera or None. Errors name ``key`` in ``job_file``.
     """
+    return tuple(load_gltf_scene(path, key=key, job_file=job_file)[:6])
+
+
+def load_gltf_scene(
+    path: str | Path, *, key: str = "scene.file", job_file: str | Path | None = None
+) -> GltfScene:
+    """:func:`load_gltf` and the moving nodes (``extras.relray``, module table)."""
     path = Path(path)
     return _guarded(path, key, job_file, lambda: _load(path, key, job_file))
 
 
-def _load(path: Path, key: str, job_file: str | Path | None) -> GltfResult:
+def _finite_vector(value: Any, where: str) -> np.ndarray:
+    if (not isinstance(value, list) or len(value) != 3 or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) for x in value)):
+        raise _CorruptError(f"{where} must be an array of 3 numbers")
+    v = np.array(value, dtype=np.float64)
+    if not np.all(np.abs(v) <= MAX_ABS_NUMBER):
+        raise _CorruptError(f"{where} must be finite and within ±{MAX_ABS_NUMBER:g}")
+    return v
+
+
+def _node_motion(node: dict[str, Any], index: int, world: np.ndarray) -> NodeMotion | None:
+    """The node's ``extras.relray`` motion (validated as a job object's keys), or None."""
+    extras = node.get("extras")
+    spec = extras.get("relray") if isinstance(extras, dict) else None
+    if spec is None:
+        return None
+    where = f"nodes[{index}].extras.relray"
+    if not isinstance(spec, dict):
+        raise _CorruptError(f"{where} must be an object")
+    unknown = sorted(set(spec) - set(MOTION_KEYS))
+    if unknown:
+        raise _CorruptError(f"{where}: unknown key '{unknown[0]}' (known: "
+                            f"{', '.join(MOTION_KEYS)})")
+    velocity = Y_UP_TO_Z_UP @ _finite_vector(spec.get("velocity", [0, 0, 0]),
+                                             f"{where}.velocity")
+    if not np.linalg.norm(velocity) < 1.0:
+        raise _CorruptError(f"{where}.velocity: |velocity| = {np.linalg.norm(velocity):.6g} "
+                            "must be below 1 (the speed of light, c = 1)")
+    pivot = (Y_UP_TO_Z_UP @ _finite_vector(spec["pivot"], f"{where}.pivot")
+             if "pivot" in spec else world[:3, 3].copy())
+    worldline = None
+    if "worldline" in spec:
+        if np.any(velocity):
+            raise _CorruptError(f"{where}: give either velocity or worldline, not both")
+        worldline = _node_worldline(spec["worldline"], f"{where}.worldline")
+    if worldline is None and not np.any(velocity):
+        return None
+    return NodeMotion(f"nodes[{index}]", frozen(velocity), frozen(pivot), worldline)
+
+
+def _node_worldline(w: Any, where: str) -> Worldline:
+    """{t, pivot}: at least 2 strictly increasing times, one position per time, every
+    segment below c (Z-up positions)."""
+    if not isinstance(w, dict) or set(w) != {"t", "pivot"}:
+        raise _CorruptError(f"{where} must be an object with exactly t and pivot")
+    t, p = w["t"], w["pivot"]
+    if (not isinstance(t, list) or len(t) < 2 or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) for x in t)):
+        raise _CorruptError(f"{where}.t must be an array of at least 2 numbers")
+    times = np.array(t, dtype=np.float64)
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0.0):
+        raise _CorruptError(f"{where}.t must be finite and strictly increasing")
+    if not isinstance(p, list) or len(p) != len(t):
+        raise _CorruptError(f"{where}.pivot must hold one position per time ({len(t)})")
+    pos = np.array([Y_UP_TO_Z_UP @ _finite_vector(x, f"{where}.pivot[{k}]")
+                    for k, x in enumerate(p)])
+    speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / np.diff(times)
+    fast = np.flatnonzero(~(speed < 1.0))
+    if len(fast):
+        k = int(fast[0])
+        raise _CorruptError(f"{where}: segment {k} moves at {speed[k]:.6g} c; every segment "
+                            "must be slower than light (c = 1)")
+    return Worldline(frozen(times), frozen(pos))
+
+
+def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
     doc, glb_bin = _read_document(path, key, job_file)
     buffers = _load_buffers(doc, path.parent, glb_bin, key, job_file)
     materials = [_material(m, i) for i, m in enumerate(doc.get("materials", []))]
     default_id: int | None = None
-    tris, norms, mids = [], [], []
+    tris, norms, mids, moving = [], [], [], []
+    motions: list[NodeMotion] = []
     lights: list[LightSpec] = []
     light_defs = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
     for index, node, world in _walk_nodes(doc):
         if "mesh" in node:
+            motion = _node_motion(node, index, world)
+            if motion is not None:
+                motions.append(motion)
+            motion_id = len(motions) - 1 if motion is not None else -1
             mesh = _item(doc, "meshes", node["mesh"], f"nodes[{index}].mesh")
             for p, prim in enumerate(mesh["primitives"]):
                 where = f"meshes[{node['mesh']}].primitives[{p}]"
@@ -653,6 +769,7 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfResult:
                 tris.append(got[0])
                 norms.append(got[1])
                 mids.append(np.full(len(got[0]), mid, dtype=np.int32))
+                moving.append(np.full(len(got[0]), motion_id, dtype=np.int32))
         light_ref = node.get("extensions", {}).get("KHR_lights_punctual")
         if light_ref is not None:
             li = _index(light_ref.get("light"), len(light_defs),
@@ -665,4 +782,6 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfResult:
                   for t, n in zip(tris, norms, strict=True)]
         normals = np.concatenate(filled)
     material_ids = np.concatenate(mids) if mids else np.zeros(0, dtype=np.int32)
-    return triangles, normals, material_ids, materials, lights, _first_camera(doc)
+    tri_motion = np.concatenate(moving) if moving else np.zeros(0, dtype=np.int32)
+    return GltfScene(triangles, normals, material_ids, materials, lights, _first_camera(doc),
+                     tri_motion, motions)
