@@ -327,11 +327,16 @@ def enabled_passes(view_layer) -> list[str]:
 
 
 def scene_hash(scene, mode: str) -> str:
-    """A content hash of an exported core Scene (geometry, materials, lights, sky)."""
+    """A content hash of an exported core Scene (geometry, materials, lights, sky, and
+    the moving objects' groups: their velocities and pivots)."""
     h = hashlib.blake2b(digest_size=16)
-    for a in (scene.triangles, scene.normals, scene.material_ids, scene.background):
+    for a in (scene.triangles, scene.normals, scene.material_ids, scene.background,
+              scene.tri_group):
         if a is not None:
             h.update(np.ascontiguousarray(a).tobytes())
+    for group in scene.groups:
+        for seg in group.segments:
+            h.update(np.array([*seg.u, seg.t_ref, *seg.p_ref, seg.t_lo, seg.t_hi]).tobytes())
     h.update(repr(scene.materials).encode())
     for light in scene.lights:
         h.update(repr(light).encode())

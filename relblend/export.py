@@ -45,6 +45,10 @@ world                    Background colour × strength (constant sky), or ``worl
 camera                   perspective: world matrix (scale removed), lens and sensor fit →
                          vertical FOV, shift converted to the core's units (the larger
                          image side), pixel aspect 1
+``object.relray``        a moving object: ``velocity`` (world axes, |v| < 1), its pivot the
+``.velocity`` ≠ 0        object's world location at the frame (lab time 0); its evaluated
+                         mesh there is its rest-frame shape; objects with one velocity
+                         share a group (``core.scene.worldlines``)
 =======================  ==================================================================
 """
 
@@ -62,7 +66,9 @@ import numpy as np
 from ..core.errors import UserError
 from ..core.physics import spectrum
 from ..core.scene import job as core_job
+from ..core.scene.description import ObjectSpec, frozen
 from ..core.scene.geometry import Scene, scene_from_parts
+from ..core.scene.worldlines import rest_frame_offsets
 
 #: Object types that ``to_mesh`` turns into triangles.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
@@ -535,6 +541,7 @@ class _Builder:
     tris: list[np.ndarray] = field(default_factory=list)
     normals: list[np.ndarray] = field(default_factory=list)
     ids: list[np.ndarray] = field(default_factory=list)
+    motions: list[ObjectSpec | None] = field(default_factory=list)  # per add(): None static
 
     def material_id(self, mat) -> int:
         key = "\0default" if mat is None else mat.name_full
@@ -543,11 +550,48 @@ class _Builder:
             self.materials.append(material_spec(mat, self.warnings))
         return self.index[key]
 
-    def add(self, tris: np.ndarray, normals: np.ndarray, ids: np.ndarray) -> None:
+    def add(self, tris: np.ndarray, normals: np.ndarray, ids: np.ndarray,
+            motion: ObjectSpec | None = None) -> None:
         if len(tris):
             self.tris.append(tris)
             self.normals.append(normals)
             self.ids.append(np.asarray(ids, np.int32))
+            self.motions.append(motion)
+
+    def moving_groups(self) -> tuple[np.ndarray | None, tuple]:
+        """Place the moving objects' triangles in their groups' rest frames (in place);
+        returns (per-triangle group, the groups), (None, ()) when nothing moves."""
+        if not any(m is not None for m in self.motions):
+            return None, ()
+        specs = [m for m in self.motions if m is not None]
+        group_of, groups, offsets = rest_frame_offsets(specs)
+        tri_group, k = [], 0
+        for i, m in enumerate(self.motions):
+            g = 0
+            if m is not None:
+                g = group_of[k]
+                self.tris[i] = self.tris[i] + offsets[k]
+                k += 1
+            tri_group.append(np.full(len(self.tris[i]), g, np.int32))
+        return np.concatenate(tri_group), tuple(groups)
+
+
+def object_motion(obj_eval, matrix: np.ndarray) -> ObjectSpec | None:
+    """The object's own velocity (``object.relray.velocity``, world axes) as the core's
+    moving-object keys, pivot = its world location now; None when it does not move.
+    |velocity| >= 1 or a non-finite value stops the render with the object's name."""
+    settings = getattr(obj_eval.original, "relray", None)
+    if settings is None:
+        return None
+    u = np.array(settings.velocity, np.float64)
+    if not np.any(u):
+        return None
+    speed = float(np.linalg.norm(u))
+    if not speed < 1.0:
+        raise ExportError(f"object '{obj_eval.name}': its velocity |v| = {speed:.6g} must be "
+                          "below 1 (the speed of light, c = 1)")
+    return ObjectSpec(name=obj_eval.name, shape="mesh", material="", params={},
+                      velocity=frozen(u), pivot=frozen(matrix[:3, 3]))
 
 
 def _slot_materials(obj_eval) -> list:
@@ -613,15 +657,17 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
                              for i in range(max(len(mats), 1))], np.int32)
         idx = np.clip(arrays.material_index, 0, len(slot_ids) - 1)
         tris, normals = transform(arrays, matrix)
-        b.add(tris, normals, slot_ids[idx])
+        b.add(tris, normals, slot_ids[idx], object_motion(obj, matrix))
 
     empty = np.zeros((0, 3, 3))
+    tri_group, groups = b.moving_groups()
     try:  # area lights become quads, degenerate triangles go, normals made unit: the core
         core_scene = scene_from_parts(
             np.concatenate(b.tris) if b.tris else empty,
             np.concatenate(b.normals) if b.normals else empty,
             np.concatenate(b.ids) if b.ids else np.zeros(0, np.int32),
-            b.materials, lights, world_background(scene.world, warnings), camera)
+            b.materials, lights, world_background(scene.world, warnings), camera,
+            tri_group=tri_group, groups=groups)
     except UserError as e:
         raise ExportError(f"the scene has no geometry to render ({e.detail})") from None
     by_material = {m.name: core_scene.triangles[core_scene.material_ids == i]

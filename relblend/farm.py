@@ -21,6 +21,11 @@ scene.glb           triangles of every renderable mesh object. Materials: the ex
                     both renders use an image's mean colour)
 [[materials]],      blackbody emitters (removed from the glb, written as PLY meshes)
 [[objects]]
+moving objects      a mesh object with ``object.relray.velocity`` ≠ 0: its glb node gets
+                    ``extras.relray = {velocity, pivot}`` (glTF's Y-up axes; the pivot is
+                    its world location at the exported frame), as the core reads moving
+                    glTF nodes. A moving object must be a node of its own (not an
+                    instance) and may not carry a blackbody material (those leave the glb)
 [[lights]]          point, spot, sun and area lights (the glTF light units would round-trip
                     through photometric conversions; an area light's ``up`` keeps its
                     rotation about its axis)
@@ -238,6 +243,37 @@ def patch_materials(doc: dict[str, Any], specs: dict[str, Any], drop: set[str]) 
     return removed
 
 
+#: relray's Z-up (x, y, z) -> glTF's Y-up (x, z, -y): the inverse of the core's import.
+Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def moving_objects(scene) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Renderable mesh objects with a velocity: name -> (velocity, world location)."""
+    out = {}
+    for obj in scene.objects:
+        if obj.type != "MESH" or obj.hide_render:
+            continue
+        u = np.array(obj.relray.velocity, np.float64)
+        if np.any(u):
+            out[obj.name] = (u, np.array(obj.matrix_world.translation, np.float64))
+    return out
+
+
+def patch_motion(doc: dict[str, Any], moving: dict[str, tuple[np.ndarray, np.ndarray]]) -> int:
+    """Write each moving object's ``extras.relray`` on its glb node (by name); returns
+    how many nodes were patched. An object without a node of its own is an error."""
+    nodes = {n.get("name"): n for n in doc.get("nodes", [])}
+    missing = sorted(set(moving) - set(nodes))
+    if missing:
+        raise FarmExportError(f"moving object '{missing[0]}' has no node of its own in the "
+                              "exported glTF (an instance?); make it a real object")
+    for name, (u, pivot) in moving.items():
+        extras = nodes[name].setdefault("extras", {})
+        extras["relray"] = {"velocity": (Z_UP_TO_Y_UP @ u).tolist(),
+                            "pivot": (Z_UP_TO_Y_UP @ pivot).tolist()}
+    return len(moving)
+
+
 def write_ply(path: Path, triangles: np.ndarray) -> None:
     """Binary little-endian PLY of unshared triangles (float32 vertices)."""
     tris = np.asarray(triangles, np.float32).reshape(-1, 3)
@@ -392,8 +428,17 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
             export_image_format="NONE", export_yup=True, export_extras=False)
     specs = {m.name: m for m in exported.scene.materials}
     special = {m.name for m in exported.scene.materials if m.emission_blackbody is not None}
+    moving = moving_objects(scene)
+    for name in moving:
+        hot = {slot.material.name for slot in scene.objects[name].material_slots
+               if slot.material is not None} & special
+        if hot:
+            raise FarmExportError(f"moving object '{name}' has the blackbody material "
+                                  f"'{sorted(hot)[0]}', which the farm export writes as a "
+                                  "static mesh; give it an emission colour instead")
     doc, binary = read_glb(glb)
     patch_materials(doc, specs, special)
+    patch_motion(doc, moving)
     write_glb(glb, doc, binary)
 
     materials, objects, plys = [], [], []

@@ -30,6 +30,14 @@ property            meaning
 In worldline mode the camera object's own location is its lab position at ct' = 0;
 β between integer frames is linear in proper time (the job format's keyframes).
 
+``bpy.types.Object.relray`` (:class:`RelrayObjectSettings`), in the Object tab
+("Relativity" panel, meshes): ``velocity``, the object's own constant lab velocity u
+(v/c per world axis, |u| < 1, checked when rendering with a message naming the object),
+and the read-only ``gamma``. The object's world location at the rendered frame is its
+pivot at lab time 0 (physics.md, "Moving objects"): its mesh there is its rest-frame
+shape, and it moves at u through the lab. Objects with the same velocity share one rest
+frame (one BVH).
+
 ``bpy.types.Scene.relray`` (:class:`RelraySceneSettings`), "Relativistic" panels of the
 Render tab: samples, seed, max bounces, spectral model, Doppler and searchlight
 switches, threads. ``bpy.types.ViewLayer.relray`` (:class:`RelrayViewLayerSettings`):
@@ -180,6 +188,33 @@ class RelraySceneSettings(bpy.types.PropertyGroup):
                          min=0, soft_max=256, default=0)
 
 
+def _object_gamma_get(self) -> float:
+    """γ of the object's velocity (0 when |u| >= 1: invalid)."""
+    b2 = sum(float(x) * float(x) for x in self.velocity)
+    return 1.0 / ((1.0 - b2) ** 0.5) if b2 < 1.0 else 0.0
+
+
+class RelrayObjectSettings(bpy.types.PropertyGroup):
+    """A mesh object's own motion (see the module docstring)."""
+
+    velocity: FloatVectorProperty(
+        name="Velocity",
+        description="The object's own velocity v/c in world axes; |v| must stay below 1 "
+                    "(the speed of light). Its location is where it is at lab time 0",
+        size=3,
+        subtype="XYZ",
+        min=-BETA_HARD_MAX,
+        max=BETA_HARD_MAX,
+        soft_min=-BETA_SOFT_MAX,
+        soft_max=BETA_SOFT_MAX,
+        step=1,
+        precision=4,
+        default=(0.0, 0.0, 0.0),
+    )
+    gamma: FloatProperty(name="γ", description="Lorentz factor of the velocity",
+                         get=_object_gamma_get, precision=6)
+
+
 class RelrayViewLayerSettings(bpy.types.PropertyGroup):
     """Extra passes of the Relativistic engine."""
 
@@ -227,8 +262,8 @@ def addon_preferences(context):
     return None if addon is None else addon.preferences
 
 
-classes = (RelrayCameraSettings, RelraySceneSettings, RelrayViewLayerSettings,
-           RelrayPreferences)
+classes = (RelrayCameraSettings, RelraySceneSettings, RelrayObjectSettings,
+           RelrayViewLayerSettings, RelrayPreferences)
 
 
 def register() -> None:
@@ -236,11 +271,13 @@ def register() -> None:
         bpy.utils.register_class(cls)
     bpy.types.Camera.relray = PointerProperty(type=RelrayCameraSettings)
     bpy.types.Scene.relray = PointerProperty(type=RelraySceneSettings)
+    bpy.types.Object.relray = PointerProperty(type=RelrayObjectSettings)
     bpy.types.ViewLayer.relray = PointerProperty(type=RelrayViewLayerSettings)
 
 
 def unregister() -> None:
     del bpy.types.ViewLayer.relray
+    del bpy.types.Object.relray
     del bpy.types.Scene.relray
     del bpy.types.Camera.relray
     for cls in reversed(classes):

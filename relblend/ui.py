@@ -128,6 +128,27 @@ class RELRAY_PT_camera_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 -
         layout.label(text=view_readout(context, cam), icon="INFO")
 
 
+class RELRAY_PT_object_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    bl_label = "Relativity"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return obj is not None and obj.type == "MESH" and super().poll(context)
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.object.relray
+        layout.use_property_split = True
+        layout.prop(s, "velocity")
+        col = layout.column()
+        col.enabled = False
+        col.prop(s, "gamma")
+        if any(s.velocity):
+            layout.label(text="Its location is where it is at lab time 0", icon="INFO")
+
+
 class RELRAY_PT_sampling(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Sampling"
     bl_context = "render"
@@ -241,6 +262,7 @@ class RELRAY_PT_light(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender nam
 
 classes = (
     RELRAY_PT_camera_relativity,
+    RELRAY_PT_object_relativity,
     RELRAY_PT_relativity_summary,
     RELRAY_PT_sampling,
     RELRAY_PT_film,

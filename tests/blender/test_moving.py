@@ -1,0 +1,96 @@
+"""Moving objects in Blender: the Object › Relativity panel, F12 and the farm export."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+import rendering
+import scenes
+from conftest import ext_module
+from test_farm import _compare, core_render
+
+D = 1.0 / math.sin(math.radians(10.0))  # the sphere is 10° in angular radius at rest
+SIZE = 48
+
+
+def moving_ball_scene(velocity) -> bpy.types.Scene:
+    """A camera at the origin looking along +y (90° field), a glowing unit sphere straight
+    ahead at distance D with ``object.relray.velocity``."""
+    scene = scenes.reset_scene()
+    scene.render.resolution_x = scene.render.resolution_y = SIZE
+    scene.render.resolution_percentage = 100
+    scene.render.dither_intensity = 0.0
+    scene.relray.samples = 16
+    scene.relray.seed = 3
+    cam_data = bpy.data.cameras.new("cam")
+    cam_data.angle = math.radians(90.0)
+    cam = bpy.data.objects.new("cam", cam_data)
+    cam.rotation_euler = (math.pi / 2, 0.0, 0.0)  # -Z (the view) onto +y, +Y up onto +z
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0.0, D, 0.0), segments=64,
+                                         ring_count=32)
+    ball = bpy.context.active_object
+    ball.name = "ball"
+    ball.data.materials.append(scenes.principled("glow", (0.0, 0.0, 0.0),
+                                                 emission=(1.0, 1.0, 1.0), strength=1.0))
+    ball.relray.velocity = velocity
+    return scene
+
+
+def test_the_object_velocity_property_and_panel(ext):
+    scene = moving_ball_scene((0.5, 0.0, 0.0))
+    ball = scene.objects["ball"]
+    assert tuple(ball.relray.velocity) == pytest.approx((0.5, 0.0, 0.0))
+    assert ball.relray.gamma == pytest.approx(1.0 / math.sqrt(0.75))
+    assert hasattr(bpy.types, "RELRAY_PT_object_relativity")
+    ball.relray.velocity = (0.0, 0.0, 0.0)
+    assert ball.relray.gamma == pytest.approx(1.0)
+
+
+def coverage_column(rgba: np.ndarray) -> tuple[float, float]:
+    """(column, row) of the coverage's centroid, in pixels (row 0 = top)."""
+    a = rgba[..., 3].astype(np.float64)
+    rows, cols = np.mgrid[0:a.shape[0], 0:a.shape[1]] + 0.5
+    return float((a * cols).sum() / a.sum()), float((a * rows).sum() / a.sum())
+
+
+def test_f12_shows_the_moving_sphere_where_its_light_left_it(ext, engine):
+    """At rest the ball is in the middle; moving at 0.5 c along +x it is seen 60.378° from
+    -x (physics.md's Penrose–Terrell row): the image plane's x = -cot 60.378° = -0.569,
+    column 10.35 of 48. The coverage centroid of a small circle seen off-axis lies within
+    a pixel of its centre's projection (1.5 px allowed)."""
+    for velocity, column in (((0.0, 0.0, 0.0), SIZE / 2),
+                             ((0.5, 0.0, 0.0), (1.0 - 1.0 / math.tan(math.radians(60.378)))
+                              * SIZE / 2)):
+        scene = moving_ball_scene(velocity)
+        rendering.render_still(scene)
+        col, row = coverage_column(engine.RESULTS[1]["rgba"])
+        assert abs(col - column) < 1.5 and abs(row - SIZE / 2) < 1.0, (velocity, col, row)
+
+
+def test_the_farm_job_renders_the_moving_sphere_as_f12_does(ext, engine, tmp_path):
+    scene = moving_ball_scene((0.5, 0.0, 0.2))
+    rendering.render_still(scene)
+    in_blender = engine.RESULTS[1]["rgba"]
+    out = tmp_path / "farm"
+    assert bpy.ops.relray.export_farm(directory=str(out)) == {"FINISHED"}
+    farm = ext_module("relblend.farm")
+    gl, _ = farm.read_glb(out / "scene.glb")
+    node = next(n for n in gl["nodes"] if n.get("name") == "ball")
+    # Blender's (x, y, z) is glTF's (x, z, -y)
+    assert node["extras"]["relray"]["velocity"] == pytest.approx([0.5, 0.2, 0.0])
+    assert node["extras"]["relray"]["pivot"] == pytest.approx([0.0, 0.0, -D])
+    rgba, _ = core_render(out / "job.toml", 1)
+    mean_rel, block = _compare(in_blender, rgba)
+    assert mean_rel < 0.03 and block < 0.10, (mean_rel, block)
+    assert abs(coverage_column(rgba)[0] - coverage_column(in_blender)[0]) < 0.5
+
+
+def test_a_velocity_at_or_above_c_stops_the_render(ext, engine):
+    scene = moving_ball_scene((0.8, 0.7, 0.0))  # each component < 1, |v| = 1.063
+    with pytest.raises(RuntimeError, match=r"object 'ball': its velocity \|v\| = 1\.06"):
+        rendering.render_still(scene)
