@@ -223,7 +223,8 @@ def write(out: Path, md: Path) -> Path:
     d = {name: _read(out, name) for name in (
         "throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
         "convergence_medians", "equal_error", "converged_compare", "adaptive_gain",
-        "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups")}
+        "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups",
+        "moving_emitter_noise")}
     conv_cfg = meta.get("sections", {}).get("convergence", {}).get("config")
     if d["convergence_medians"] and conv_cfg:
         # derived tables: recomputed from the medians, so they follow this module's rules
@@ -765,6 +766,19 @@ def _section_moving(add, d) -> None:
         "little: most rays never reach its BVH. Next steps: one Embree scene per group "
         "with rays batched over the segments (fewer Python round trips per bounce), and "
         "a bounding box per group instead of a sphere.\n")
+    noise = d["moving_emitter_noise"]
+    if noise:
+        n0 = noise[0]
+        add(f"**Moving emitters are reached by BSDF sampling only** (next-event estimation "
+            "would have to solve for the emission event on the light's worldline); MIS "
+            "weights stay correct (the light is not in the NEE table, so a BSDF hit on it "
+            f"weighs 1). The noise it costs, Cornell box {n0['width']:.0f}², "
+            f"{n0['spp']:.0f} spp, relative MSE against a static {n0['ref_spp']:.0f}-spp "
+            "reference:\n")
+        add(table(noise, [("variant", "variant", ""), ("relative MSE", "rel_mse", ".4f"),
+                          ("÷ static", "mse_over_static", ".2f"),
+                          ("CPU ms/spp", lambda r: 1e3 * r["cpu_per_spp_s"], ".2f")]))
+        add("")
 
 
 def _section_profile(add, d, plots, md, meta) -> None:

@@ -178,6 +178,9 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         rows = velocity_groups.group_rows(plan.moving_spp, plan.moving_size, plan.moving_size,
                                           threads, plan.moving_repeat)
         cm.write_csv(out / "velocity_groups.csv", rows)
+        cm.write_csv(out / "moving_emitter_noise.csv",
+                     velocity_groups.noise_rows(plan.moving_spp, plan.moving_size,
+                                                plan.moving_size, threads))
         done("moving")
     if "convergence" in sections:
         section("convergence")

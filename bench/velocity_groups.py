@@ -7,7 +7,9 @@ groups move slowly (|u| = 1e-4 in eight directions), so the picture, the paths a
 rays are the same and only the cost of tracing several frames shows. A second variant
 moves only the tall box (a small moving object in a static room, the common case).
 Runs are interleaved over the variants and reduced to medians of CPU time per spp;
-the ratio is against N = 0 in the same run.
+the ratio is against N = 0 in the same run. :func:`noise_rows` measures what reaching a
+moving emitter by BSDF sampling only costs in noise: the box's light static (NEE + MIS)
+against the same light moving at 1e-4 c, relative MSE at equal spp.
 
     .venv/bin/python -m relray.bench.velocity_groups [--quick]
 """
@@ -59,6 +61,43 @@ def tall_box(scene: Scene) -> np.ndarray:
     return inner & (centre_x < 0.0)
 
 
+def emitters(scene: Scene) -> np.ndarray:
+    """The emissive triangles (the Cornell box's ceiling light)."""
+    return np.array([m.emission_strength > 0 and any(m.emission)
+                     for m in scene.materials])[scene.material_ids]
+
+
+def light_group_scene(scene: Scene) -> Scene:
+    """``scene`` with only its emitters in a slowly moving group: they leave the NEE
+    table (moving emitters are reached by BSDF sampling only)."""
+    tri_group = emitters(scene).astype(np.int32)
+    segs = (VelocityGroup((Segment(SLOW * DIRECTIONS[0], 0.0, np.zeros(3)),)),)
+    return scene_from_parts(scene.triangles, scene.normals, scene.material_ids,
+                            scene.materials, scene.lights, scene.background, scene.camera,
+                            tri_group=tri_group, groups=segs)
+
+
+def noise_rows(spp: int, width: int, height: int, threads: int,
+               ref_factor: int = 16) -> list[dict[str, Any]]:
+    """The noise cost of reaching a moving emitter by BSDF sampling only: relative MSE at
+    equal spp of the Cornell box with its light static (NEE + MIS) and moving at 1e-4 c
+    (BSDF sampling only), against a converged static render."""
+    base = cm.RelrayBench(cm.make_job(cm.job_dict()))
+    moving = cm.RelrayBench(base.job, scene=light_group_scene(base.scene))
+    ref = base.render(spp=spp * ref_factor, width=width, height=height, threads=threads,
+                      seed=1000).rgb
+    rows = []
+    for name, b in (("light static: NEE + MIS", base),
+                    ("light moving: BSDF sampling only", moving)):
+        r = b.render(spp=spp, width=width, height=height, threads=threads)
+        rows.append({"variant": name, "rel_mse": cm.rel_mse(r.rgb, ref),
+                     "cpu_per_spp_s": r.cpu / spp, "spp": spp, "ref_spp": spp * ref_factor,
+                     "width": width, "height": height})
+    rows[1]["mse_over_static"] = rows[1]["rel_mse"] / rows[0]["rel_mse"]
+    rows[0]["mse_over_static"] = 1.0
+    return rows
+
+
 def group_rows(spp: int, width: int, height: int, threads: int,
                repeat: int) -> list[dict[str, Any]]:
     """CPU seconds per spp per variant (medians of interleaved runs), and the ratio to
@@ -102,6 +141,9 @@ def main(argv: list[str] | None = None) -> None:
     for r in group_rows(spp, size, size, 2, repeat):
         print(f"{r['variant']:>24}: {1e3 * r['cpu_per_spp_s']:7.2f} ms/spp  "
               f"{r['over_static']:.2f}x  image diff {r['mean_abs_diff']:.4f}")
+    for r in noise_rows(spp, size, size, 2):
+        print(f"{r['variant']:>34}: relative MSE {r['rel_mse']:.4f} "
+              f"({r['mse_over_static']:.2f}x)")
 
 
 if __name__ == "__main__":
