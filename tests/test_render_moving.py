@@ -323,3 +323,95 @@ def test_many_velocity_groups_each_seen_where_its_light_left_it(tmp_path):
     centres = [(np.arange(8 * k, 8 * k + 8) + 0.5) @ cols[8 * k:8 * k + 8]
                / cols[8 * k:8 * k + 8].sum() for k in range(n)]
     np.testing.assert_allclose(centres, (np.arange(n) + 0.5) * 8, atol=1.0)
+
+
+# ------------------------------------------------------- a rod along the line of sight
+
+def retarded_distance(c: np.ndarray, u: np.ndarray) -> float:
+    """Lab distance s at which a point moving as c + u t is seen from the origin at t = 0:
+    |c - u s| = s (emitted at t = -s)."""
+    a = 1.0 - u @ u
+    b = 2.0 * (c @ u)
+    return float((-b + math.sqrt(b * b + 4.0 * a * (c @ c))) / (2.0 * a))
+
+
+@pytest.mark.parametrize("b", [0.5, -0.5])
+def test_a_rod_along_the_line_of_sight_looks_longer_approaching(tmp_path, b):
+    """physics.md: a rod along the line of sight appears √((1+β)/(1-β)) times its rest
+    length: 1.732 approaching (β = 0.5 towards the camera), 0.577 receding. The rod's ends
+    are two small glowing plates (rest length L = 4 apart along the view, ±0.5 aside so
+    both are seen); the Depth AOV gives each end's apparent distance. Checked: each
+    end's depth against its light-travel-time solution (float32 ray precision, 1e-4 of
+    the distance), and the apparent length over L against the formula (the ends are
+    seen 1.4° off the axis: that changes the ratio by < 1e-3)."""
+    L, g = 4.0, 1.0 / math.sqrt(1.0 - b * b)
+    u = np.array([0.0, -b, 0.0])
+    # lab positions at t = 0 (the lab sees the rod contracted: L/γ); the near end is seen
+    # 20 away (|c - u s| = s on the axis: c_y = 20 (1 - β))
+    near = np.array([-0.5, 20.0 * (1.0 - b), 0.0])
+    far = near + np.array([1.0, L / g, 0.0])
+    plate = [[-0.3, 0.0, -0.3], [0.3, 0.0, -0.3], [0.3, 0.0, 0.3], [-0.3, 0.0, 0.3]]
+    objects = [{"shape": "quad", "material": "glow", "velocity": u.tolist(),
+                "corners": (np.array(plate) + c).tolist()} for c in (near, far)]
+    job = base_job(render={"width": 128, "height": 128, "spp": 4},
+                   output={"formats": ["exr"], "aovs": ["depth"]}, camera={"fov": 20.0},
+                   materials=[{"name": "glow", "base_color": [0, 0, 0],
+                               "emission": [1, 1, 1], "emission_strength": 1.0}],
+                   objects=objects)
+    r = render(job, tmp_path)
+    depth = r.image.aovs["depth"]
+    full = r.alpha == 1.0
+    left, right = full & (np.arange(128) < 64), full & (np.arange(128) >= 64)
+    assert left.sum() > 8 and right.sum() > 8
+    s_near, s_far = retarded_distance(near, u), retarded_distance(far, u)
+    # each plate faces the camera: its depth over its pixels varies by < 1e-4 relative
+    np.testing.assert_allclose(np.median(depth[left]), s_near, rtol=2e-4)
+    np.testing.assert_allclose(np.median(depth[right]), s_far, rtol=2e-4)
+    apparent = (np.median(depth[right]) - np.median(depth[left])) / L
+    assert apparent == pytest.approx(math.sqrt((1 + b) / (1 - b)), rel=2e-3)
+
+
+# ------------------------------------------------------------------- the Terrell cube
+
+FACES = {"front": [[-0.5, -0.5, -0.5], [0.5, -0.5, -0.5], [0.5, -0.5, 0.5], [-0.5, -0.5, 0.5]],
+         "trailing": [[-0.5, -0.5, -0.5], [-0.5, 0.5, -0.5], [-0.5, 0.5, 0.5],
+                      [-0.5, -0.5, 0.5]],
+         "leading": [[0.5, -0.5, -0.5], [0.5, 0.5, -0.5], [0.5, 0.5, 0.5], [0.5, -0.5, 0.5]]}
+
+
+def face_width(tmp_path, faces: tuple[str, ...], b: float) -> tuple[float, float]:
+    """Apparent width (scene units at the cube's distance 200) of some faces of a unit
+    cube passing at b along +x, seen straight ahead from a camera at rest, and its σ."""
+    dist, w, h, spp = 200.0, 256, 64, 16
+    fov = 0.4  # vertical, degrees: the cube spans about 100 columns
+    centre = np.array([b * dist, dist, 0.0])  # its light left it straight ahead at t = -200
+    job = base_job(render={"width": w, "height": h, "spp": spp, "spectral": "rgb"},
+                   camera={"fov": fov},
+                   materials=[{"name": "glow", "base_color": [0, 0, 0],
+                               "emission": [1, 1, 1], "emission_strength": 1.0}],
+                   objects=[{"shape": "quad", "material": "glow", "velocity": [b, 0.0, 0.0],
+                             "pivot": centre.tolist(),
+                             "corners": (np.array(FACES[face]) + centre).tolist()}
+                            for face in faces])
+    r = render(job, tmp_path / "_".join(faces))
+    rows = r.alpha[h // 2 - 8:h // 2 + 8]          # rows well inside the cube's height
+    px = 2.0 * math.tan(math.radians(fov) / 2.0) / h * dist
+    widths = rows.sum(axis=1) * px
+    sigma = math.sqrt(float((rows * (1 - rows)).sum(axis=1).mean()) / spp) * px
+    return float(widths.mean()), sigma
+
+
+def test_the_terrell_cube_shows_its_trailing_face(tmp_path):
+    """physics.md: a distant cube passing perpendicular looks rotated: its facing side is
+    a/γ wide and its trailing face, edge-on at rest, β a wide, beside it (the two
+    together 1/γ + β); the leading face lies behind the facing side (together no wider
+    than the facing side alone). Tolerance: 5 σ of the coverage's sampling error plus
+    the perspective of a cube 200 away (its depth changes the scale by 1/400: 0.25 %)."""
+    b = 0.6
+    g = 1.0 / math.sqrt(1.0 - b * b)
+    for faces, expect in ((("front",), 1.0 / g), (("trailing",), b),
+                          (("front", "trailing"), 1.0 / g + b),
+                          (("front", "leading"), 1.0 / g)):
+        width, sigma = face_width(tmp_path, faces, b)
+        assert abs(width - expect) <= 5 * sigma + 0.0025 * expect, (faces, width, expect,
+                                                                    sigma)
