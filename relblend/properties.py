@@ -62,6 +62,10 @@ from bpy.props import (
 #: Largest component / speed the UI accepts (|β| must stay below 1: c = 1).
 BETA_HARD_MAX = 0.999999
 BETA_SOFT_MAX = 0.99
+#: The settings of every v/c vector property (the camera's β, an object's velocity).
+VELOCITY_VECTOR = dict(size=3, subtype="XYZ", min=-BETA_HARD_MAX, max=BETA_HARD_MAX,
+                       soft_min=-BETA_SOFT_MAX, soft_max=BETA_SOFT_MAX, step=1, precision=4,
+                       default=(0.0, 0.0, 0.0))
 
 
 def _gamma_get(self) -> float:
@@ -85,18 +89,8 @@ class RelrayCameraSettings(bpy.types.PropertyGroup):
         default="VECTOR",
     )
     beta: FloatVectorProperty(
-        name="β",
-        description="Camera velocity v/c; |β| must stay below 1 (the speed of light)",
-        size=3,
-        subtype="XYZ",
-        min=-BETA_HARD_MAX,
-        max=BETA_HARD_MAX,
-        soft_min=-BETA_SOFT_MAX,
-        soft_max=BETA_SOFT_MAX,
-        step=1,
-        precision=4,
-        default=(0.0, 0.0, 0.0),
-    )
+        name="β", description="Camera velocity v/c; |β| must stay below 1 (the speed of light)",
+        **VELOCITY_VECTOR)
     speed: FloatProperty(
         name="Speed",
         description="Speed |β| = v/c of the camera",
@@ -201,16 +195,7 @@ class RelrayObjectSettings(bpy.types.PropertyGroup):
         name="Velocity",
         description="The object's own velocity v/c in world axes; |v| must stay below 1 "
                     "(the speed of light). Its location is where it is at lab time 0",
-        size=3,
-        subtype="XYZ",
-        min=-BETA_HARD_MAX,
-        max=BETA_HARD_MAX,
-        soft_min=-BETA_SOFT_MAX,
-        soft_max=BETA_SOFT_MAX,
-        step=1,
-        precision=4,
-        default=(0.0, 0.0, 0.0),
-    )
+        **VELOCITY_VECTOR)
     gamma: FloatProperty(name="γ", description="Lorentz factor of the velocity",
                          get=_object_gamma_get, precision=6)
 
