@@ -187,10 +187,15 @@ def column_split(lamu, columns, li, lf):
     top = columns - 1
     for p in range(lamu.shape[0]):
         for j in range(lamu.shape[1]):
-            u = min(max(np.float64(lamu[p, j]), 0.0), np.float64(top))
-            i = min(int(u), top - 1)
-            li[p, j] = i
-            lf[p, j] = u - i
+            li[p, j], lf[p, j] = column(lamu[p, j], top)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def column(u, top):
+    """(i, f) of the fractional column u clamped to [0, top] (:func:`column_split`)."""
+    uc = min(max(np.float64(u), 0.0), np.float64(top))
+    i = min(int(uc), top - 1)
+    return i, uc - i
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -284,42 +289,23 @@ def lab_offset(pl, g, eps, side, h, b, ig):
     return (pl[0] + yx + c * h[0], pl[1] + yy + c * h[1], pl[2] + yz + c * h[2]), gam * uy
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def shift_lanes(lamu, li, lf, pi, shift, nlanes, top):
-    """Move path ``pi``'s lanes by ``shift`` table columns (a Doppler factor D is
-    ln(D) · INV_DLOG on the log grid) and update their (i, f) (:func:`column_split`)."""
-    for j in range(nlanes):
-        u = lamu[pi, j] + shift
-        lamu[pi, j] = u
-        uc = min(max(np.float64(u), 0.0), np.float64(top))
-        i = min(int(uc), top - 1)
-        li[pi, j] = i
-        lf[pi, j] = uc - i
-
-
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def lerp_at(table, row, u, top):
     """table[row] linearly interpolated at the column u (clamped to [0, top])."""
-    uc = min(max(np.float64(u), 0.0), np.float64(top))
-    i = min(int(uc), top - 1)
-    return lerp(table, row, i, uc - i)
+    i, f = column(u, top)
+    return lerp(table, row, i, f)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def change_frame(thr, lamu, li, lf, e_row, pi, D, shift, beam, nlanes, top):
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def frame_change(D, shift, beam):
     """The backward path crosses into another frame (physics.md, "Moving objects"):
     radiance there is looked up at λ_next = D · λ and L(λ) = D⁵ L_next(D λ). At a hit on a
     moving body D = D_u = 1/(γ_u (1 + u·d)) (lab into the rest frame), when it leaves
-    D = D_out = γ_u (1 + u·d′) (rest frame into the lab). The lanes shift by ln(D)·INV_DLOG
-    columns when ``shift``, the throughput takes D⁵ when ``beam``; the cached emission
-    row is dropped."""
-    if beam:
-        d5 = D * D * D * D * D
-        for j in range(nlanes):
-            thr[pi, j] *= d5
-    if shift:
-        shift_lanes(lamu, li, lf, pi, math.log(D) * INV_DLOG, nlanes, top)
-        e_row[pi] = -1
+    D = D_out = γ_u (1 + u·d′) (rest frame into the lab). Returns (the throughput factor:
+    D⁵ when ``beam``, else 1; the lanes' shift: ln(D)·INV_DLOG columns when ``shift``,
+    else 0); :func:`shade` applies them to the path's lanes and drops its cached
+    emission row."""
+    return (D * D * D * D * D if beam else 1.0), (math.log(D) * INV_DLOG if shift else 0.0)
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -416,7 +402,12 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
             pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
             rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb, sig)
             dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
-            change_frame(thr, lamu, li, lf, e_row, pi, d_u, s_shift, s_beam, nlanes, top)
+            k5, cols = frame_change(d_u, s_shift, s_beam)
+            for j in range(nlanes):
+                thr[pi, j] *= k5
+                lamu[pi, j] += cols
+                li[pi, j], lf[pi, j] = column(lamu[pi, j], top)
+            e_row[pi] = -1
         # ---- the hit and its emission
         m = s_tri_mat[tri]
         p, g = surface_point(s_v0, s_e1, s_e2, s_ng, tri, bu[i], bv[i])
@@ -509,7 +500,12 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
         if moving:  # back into the lab: wi and D_out; the pdf per lab solid angle
             wlx, wly, wlz, d_out = aberrate_doppler_ray(wi[0], wi[1], wi[2], sh[0], sh[1],
                                                         sh[2], sb, sig)
-            change_frame(thr, lamu, li, lf, e_row, pi, d_out, s_shift, s_beam, nlanes, top)
+            k5, cols = frame_change(d_out, s_shift, s_beam)
+            for j in range(nlanes):
+                thr[pi, j] *= k5
+                lamu[pi, j] += cols
+                li[pi, j], lf[pi, j] = column(lamu[pi, j], top)
+            e_row[pi] = -1
             prev_pdf[pi] = pdf / (d_out * d_out)
             wi = (wlx, wly, wlz)
         # ---- Russian roulette
