@@ -66,3 +66,22 @@ def test_bad_beta_fails_the_command_line_render(cornell, tmp_path):
     assert (tmp_path / "bad_0001.png").is_file()
     assert not (tmp_path / "bad_0002.png").exists()
     assert proc.returncode != 0  # a farm sees the failure
+
+
+def test_a_moving_object_renders_from_the_command_line(ext, tmp_path):
+    """``blender -b`` renders the Penrose–Terrell displacement of a moving object as F12
+    does (tests/blender/test_moving.py): the glowing sphere at 0.5 c is seen about column
+    10.35 of 48 instead of the middle."""
+    import math
+
+    from test_moving import coverage_column, moving_ball_scene
+
+    moving_ball_scene((0.5, 0.0, 0.0))
+    blend = tmp_path / "moving.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    proc = _blender(str(blend), "-E", "RELRAY", "-o", str(tmp_path / "moving_####"), "-F",
+                    "PNG", "-f", "1")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rgba = rendering.load_image(tmp_path / "moving_0001.png")
+    column = (1.0 - 1.0 / math.tan(math.radians(60.378))) * 48 / 2
+    assert abs(coverage_column(rgba)[0] - column) < 1.5

@@ -94,3 +94,40 @@ def test_a_velocity_at_or_above_c_stops_the_render(ext, engine):
     scene = moving_ball_scene((0.8, 0.7, 0.0))  # each component < 1, |v| = 1.063
     with pytest.raises(RuntimeError, match=r"object 'ball': its velocity \|v\| = 1\.06"):
         rendering.render_still(scene)
+
+
+def key_ct(scene, frames_ct) -> None:
+    """Key the camera's ct' (snapshot mode, at rest: the lab time of each frame)."""
+    cam = scene.camera.data
+    for frame, ct in frames_ct:
+        cam.relray.ct = ct
+        cam.keyframe_insert("relray.ct", frame=frame)
+    presets = ext_module("relblend.presets")
+    for fc in presets.fcurves_of(cam):
+        for kp in fc.keyframe_points:
+            kp.interpolation = "LINEAR"
+
+
+def test_an_animation_renders_the_moving_sphere_as_the_farm_job_does(ext, engine, tmp_path):
+    """Ctrl-F12 over two frames whose lab time differs by 6 (ct' keyed, camera at rest):
+    the sphere moves on between them, and each frame is the farm job's frame."""
+    scene = moving_ball_scene((0.5, 0.0, 0.0))
+    scene.frame_start, scene.frame_end = 1, 2
+    key_ct(scene, ((1, 0.0), (2, 6.0)))
+    rendering.set_output(scene, tmp_path, "anim_", "PNG")
+    rendering.render_animation(scene)
+    frames = {f: engine.RESULTS[f]["rgba"] for f in (1, 2)}
+    for f, t in ((1, 0.0), (2, 6.0)):
+        # the light reaching the camera at lab time t left the centre (0.5 t_e, D) at t_e:
+        # (t - t_e)² = (0.5 t_e)² + D², the earlier root; seen at x/y = 0.5 t_e / D
+        a, b, c = 0.75, -2.0 * t, t * t - D * D
+        t_e = (-b - math.sqrt(b * b - 4 * a * c)) / (2 * a)
+        column = (1.0 + 0.5 * t_e / D) * SIZE / 2
+        assert abs(coverage_column(frames[f])[0] - column) < 1.5, (f, column)
+    scene.frame_set(1)
+    out = tmp_path / "farm"
+    assert bpy.ops.relray.export_farm(directory=str(out)) == {"FINISHED"}
+    for f in (1, 2):
+        rgba, _ = core_render(out / "job.toml", f)
+        mean_rel, block = _compare(frames[f], rgba)
+        assert mean_rel < 0.03 and block < 0.10, (f, mean_rel, block)
