@@ -274,6 +274,7 @@ def test_signal_during_start_up_is_exit_130_not_death(tmp_path, sig):
         pytest.fail("the command finished before the signal: start-up was faster than 0.2 s")
 
 
+@pytest.mark.stress
 @pytest.mark.skipif(not STRESS, reason="make stress: RELRAY_STRESS=1")
 def test_signal_at_any_moment_is_exit_130_or_done_long(tmp_path):
     """SIGINT at 120 moments from 0.15 s to 1.3 s: never a death, a traceback or a crash."""
