@@ -769,12 +769,15 @@ def _section_moving(add, d) -> None:
     noise = d["moving_emitter_noise"]
     if noise:
         n0 = noise[0]
-        add(f"**Moving emitters are reached by BSDF sampling only** (next-event estimation "
-            "would have to solve for the emission event on the light's worldline); MIS "
-            "weights stay correct (the light is not in the NEE table, so a BSDF hit on it "
-            f"weighs 1). The noise it costs, Cornell box {n0['width']:.0f}², "
-            f"{n0['spp']:.0f} spp, relative MSE against a static {n0['ref_spp']:.0f}-spp "
-            "reference:\n")
+        add("**Moving lights.** An emitter moving at a constant velocity is sampled by "
+            "next-event estimation in its rest frame (the shading event seen there, the "
+            "light-travel time its rest-frame distance; the pdf per lab solid angle "
+            "p_rest D_e², its spectrum D_e⁵ L(D_e λ)), with MIS against BSDF sampling; "
+            "an emitter on a worldline of several segments is reached by BSDF sampling "
+            "only (its MIS weight is 1), as is any moving emitter seen from a moving "
+            f"vertex. The noise each costs, Cornell box {n0['width']:.0f}², "
+            f"{n0['spp']:.0f} spp, relative MSE against a {n0['ref_spp']:.0f}-spp "
+            "reference of the light at rest:\n")
         add(table(noise, [("variant", "variant", ""), ("relative MSE", "rel_mse", ".4f"),
                           ("÷ static", "mse_over_static", ".2f"),
                           ("CPU ms/spp", lambda r: 1e3 * r["cpu_per_spp_s"], ".2f")]))

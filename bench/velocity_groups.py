@@ -8,8 +8,9 @@ rays are the same and only the cost of tracing several frames shows. A second va
 moves only the tall box (a small moving object in a static room, the common case).
 Runs are interleaved over the variants and reduced to medians of CPU time per spp;
 the ratio is against N = 0 in the same run. :func:`noise_rows` measures what reaching a
-moving emitter by BSDF sampling only costs in noise: the box's light static (NEE + MIS)
-against the same light moving at 1e-4 c, relative MSE at equal spp.
+moving light costs in noise: the box's light at rest, moving at a constant velocity
+(next-event estimation in its rest frame) and on a worldline of two segments (BSDF
+sampling only), relative MSE at equal spp.
 
     .venv/bin/python -m relray.bench.velocity_groups [--quick]
 """
@@ -17,6 +18,7 @@ against the same light moving at 1e-4 c, relative MSE at equal spp.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 from typing import Any
 
@@ -67,34 +69,44 @@ def emitters(scene: Scene) -> np.ndarray:
                      for m in scene.materials])[scene.material_ids]
 
 
-def light_group_scene(scene: Scene) -> Scene:
-    """``scene`` with only its emitters in a slowly moving group: they leave the NEE
-    table (moving emitters are reached by BSDF sampling only)."""
+def light_group_scene(scene: Scene, segments: int = 1) -> Scene:
+    """``scene`` with only its emitters in a slowly moving group: with one segment (a
+    constant velocity) next-event estimation samples them in their rest frame; on a
+    worldline of several segments (the same motion, split at lab time 0) they are reached
+    by BSDF sampling only."""
     tri_group = emitters(scene).astype(np.int32)
-    segs = (VelocityGroup((Segment(SLOW * DIRECTIONS[0], 0.0, np.zeros(3)),)),)
+    u = SLOW * DIRECTIONS[0]
+    if segments == 1:
+        segs = (Segment(u, 0.0, np.zeros(3)),)
+    else:
+        segs = (Segment(u, 0.0, np.zeros(3), -math.inf, 0.0),
+                Segment(u, 0.0, np.zeros(3), 0.0, math.inf))
     return scene_from_parts(scene.triangles, scene.normals, scene.material_ids,
                             scene.materials, scene.lights, scene.background, scene.camera,
-                            tri_group=tri_group, groups=segs)
+                            tri_group=tri_group, groups=(VelocityGroup(segs),))
 
 
 def noise_rows(spp: int, width: int, height: int, threads: int,
                ref_factor: int = 16) -> list[dict[str, Any]]:
-    """The noise cost of reaching a moving emitter by BSDF sampling only: relative MSE at
-    equal spp of the Cornell box with its light static (NEE + MIS) and moving at 1e-4 c
-    (BSDF sampling only), against a converged static render."""
+    """What moving lights cost in noise: relative MSE at equal spp of the Cornell box with
+    its light at rest, moving at 1e-4 c (next-event estimation in its rest frame, MIS),
+    and moving so on a worldline of two segments (BSDF sampling only), against a
+    converged render of the light at rest."""
     base = cm.RelrayBench(cm.make_job(cm.job_dict()))
-    moving = cm.RelrayBench(base.job, scene=light_group_scene(base.scene))
     ref = base.render(spp=spp * ref_factor, width=width, height=height, threads=threads,
                       seed=1000).rgb
     rows = []
-    for name, b in (("light static: NEE + MIS", base),
-                    ("light moving: BSDF sampling only", moving)):
+    for name, b in (("light at rest: NEE + MIS", base),
+                    ("light moving: NEE in its rest frame + MIS",
+                     cm.RelrayBench(base.job, scene=light_group_scene(base.scene))),
+                    ("light on a 2-segment worldline: BSDF sampling only",
+                     cm.RelrayBench(base.job, scene=light_group_scene(base.scene, 2)))):
         r = b.render(spp=spp, width=width, height=height, threads=threads)
         rows.append({"variant": name, "rel_mse": cm.rel_mse(r.rgb, ref),
                      "cpu_per_spp_s": r.cpu / spp, "spp": spp, "ref_spp": spp * ref_factor,
                      "width": width, "height": height})
-    rows[1]["mse_over_static"] = rows[1]["rel_mse"] / rows[0]["rel_mse"]
-    rows[0]["mse_over_static"] = 1.0
+    for r in rows:
+        r["mse_over_static"] = r["rel_mse"] / rows[0]["rel_mse"]
     return rows
 
 

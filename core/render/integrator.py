@@ -105,6 +105,10 @@ class KernelScene(NamedTuple):
     seg_h: np.ndarray   # float64 (S, 3): per moving segment, the unit direction of u
     seg_b: np.ndarray   # float64 (S,): |u|
     seg_ig: np.ndarray  # float64 (S,): 1/γ_u
+    seg_tref: np.ndarray  # float64 (S,): the lab time of its frame's origin event
+    seg_q: np.ndarray     # float64 (S, 3): its frame's origin (accelerator coordinates)
+    seg_org: np.ndarray   # float64 (S, 3): its group BVH's origin (rest-frame coordinates)
+    l_seg: np.ndarray     # int32 (K,): a moving triangle light's segment, else -1
     shift: bool         # bodies shift wavelengths (``doppler``, not rgb)
     beam: bool          # bodies apply D⁵ (``searchlight``)
 
@@ -122,6 +126,7 @@ class Paths(NamedTuple):
     e_row: np.ndarray       # int32 (N,): emission row NEE looked up last (-1: none)
     e_val: np.ndarray       # float32 (N, 4): its values per lane
     lamu: np.ndarray        # float32 (N, 4): each lane's table coordinate (unclamped)
+    prev_moving: np.ndarray  # int32 (N,): 1 when the last vertex was on a moving body
 
 
 class Rays(NamedTuple):
@@ -152,7 +157,10 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
     """Pack the scene for the kernels (``extent``: the largest BVH's, for the ray offset;
     ``segments``: :meth:`.rest_frames.MovingScene.segment_table`)."""
     if segments is None:
-        segments = (np.zeros((0, 3)), np.zeros(0), np.ones(0))
+        segments = (np.zeros((0, 3)), np.zeros(0), np.ones(0), np.zeros(0), np.zeros((0, 3)),
+                    np.zeros((0, 3)))
+    l_seg = (lights.seg if lights.seg is not None
+             else np.full(len(lights.kind), -1, np.int32))
     vn = (np.zeros((1, 3, 3), np.float32) if normals is None
           else np.ascontiguousarray(normals, np.float32))
     return KernelScene(
@@ -162,7 +170,7 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
         tables.mat_weights, tables.mat_alpha, tables.mat_ior, tables.mat_emit_row,
         tables.mat_one_sided, lights.kind, lights.prim, lights.pos, lights.dir, lights.row,
         lights.scale, lights.spot, lights.cdf, lights.tri_pmf, float(lights.sky_pmf),
-        int(lights.sky_row), ray_offset(extent), *segments, False, False)
+        int(lights.sky_row), ray_offset(extent), *segments, l_seg, False, False)
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
@@ -297,6 +305,17 @@ def lerp_at(table, row, u, top):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def to_rest(p, t, h, b, ig, t_ref, q, org):
+    """The lab event (t, p) (accelerator coordinates) in a segment's rest frame, as a
+    point of its group's BVH coordinates: Λ(u)'s spatial part of (t - t_ref, p - q),
+    x + γ²/(γ+1) (u·x) u - γ u Δt, minus the BVH origin ``org`` (u = b h, ig = 1/γ)."""
+    g = 1.0 / ig
+    ex, ey, ez = p[0] - q[0], p[1] - q[1], p[2] - q[2]
+    c = (g * g / (g + 1.0) * b * (h[0] * ex + h[1] * ey + h[2] * ez) - g * (t - t_ref)) * b
+    return ex + c * h[0] - org[0], ey + c * h[1] - org[1], ez + c * h[2] - org[2]
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def frame_change(D, shift, beam):
     """The backward path crosses into another frame (physics.md, "Moving objects"):
     radiance there is looked up at λ_next = D · λ and L(λ) = D⁵ L_next(D λ). At a hit on a
@@ -359,8 +378,9 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
     (s_v0, s_e1, s_e2, s_ng, s_area, s_vn, s_has_vn, s_tri_mat, s_refl, s_emit, s_mat_w,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
-     s_eps, s_seg_h, s_seg_b, s_seg_ig, s_shift, s_beam) = sc
-    keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu = paths
+     s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
+     s_beam) = sc
+    keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu, prev_moving = paths
     idx, o, d, rt = rays
     t_hit, prim, bu, bv, hseg = hits
     sh_idx, sh_o, sh_d, sh_t, sh_c, sh_t0 = shadows
@@ -418,7 +438,10 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
         er = s_mat_emit_row[m]
         if er >= 0 and (front or s_mat_one_sided[m] == 0):
             w = 1.0
-            if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[tri] > 0.0:
+            if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[tri] > 0.0 and not (
+                    moving and prev_moving[pi] == 1):
+                # (a moving light's pdf per lab solid angle is p_sel t_lab²/(A |cos θ|) with
+                # its rest-frame cos θ; from a moving vertex it is not sampled: weight 1)
                 w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
                     s_tri_pmf[tri], s_area[tri], t_hit[i], cos_g))
             for j in range(nlanes):
@@ -442,6 +465,9 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
             k, p_sel, cdf_k = select(s_l_cdf, u_a)
             light = light_record(k, s_l_kind, s_l_prim, s_l_pos, s_l_dir, s_l_scale, s_l_spot,
                                  s_v0, s_e1, s_e2, s_ng, s_area, s_tri_mat, s_mat_one_sided)
+            ls = s_l_seg[k]
+            d_l = 1.0  # the Doppler factor the light's spectrum is looked up with
+            r_l = 0.0  # a moving light's rest-frame distance
             if moving:  # lights are sampled in the lab, from the hit's lab point
                 eps_l = ray_offset_at(s_eps, pl[0], pl[1], pl[2])
                 wi, p_l, scale, delta, finite, target, ok = sample_light(
@@ -452,8 +478,31 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
                 wux, wuy, wuz, inv_dout = aberrate_doppler_ray(wi[0], wi[1], wi[2], -sh[0],
                                                                -sh[1], -sh[2], sb, sig)
                 d_out = 1.0 / inv_dout
+                d_l = d_out
+                # (a moving light is not sampled from a moving vertex: BSDF sampling only)
                 ok, kd, km, s, c = nee_factors(wo, (wux, wuy, wuz), nrm, g,
-                                               p_l * d_out * d_out, scale, delta, ok, wd, wm, a2)
+                                               p_l * d_out * d_out, scale, delta, ok and ls < 0,
+                                               wd, wm, a2)
+            elif ls >= 0:  # a moving triangle light, sampled in its rest frame
+                lh = (s_seg_h[ls, 0], s_seg_h[ls, 1], s_seg_h[ls, 2])
+                lb = s_seg_b[ls]
+                lig = s_seg_ig[ls]
+                xr = to_rest(p, t_ev, lh, lb, lig, s_seg_tref[ls],
+                             (s_seg_q[ls, 0], s_seg_q[ls, 1], s_seg_q[ls, 2]),
+                             (s_seg_org[ls, 0], s_seg_org[ls, 1], s_seg_org[ls, 2]))
+                wr, p_r, scale, delta, finite, target, ok = sample_light(
+                    light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, xr[0], xr[1], xr[2],
+                    eps)
+                # into the lab: the direction, D_e = ν_lab/ν_rest, the pdf per lab solid
+                # angle p_r D_e² (dΩ_lab = dΩ_rest / D_e²) and the lab distance r D_e
+                wlx, wly, wlz, d_x = aberrate_doppler_ray(wr[0], wr[1], wr[2], lh[0], lh[1],
+                                                          lh[2], lb, lig)
+                d_l = 1.0 / d_x
+                wi = (wlx, wly, wlz)
+                rx, ry, rz = target[0] - xr[0], target[1] - xr[1], target[2] - xr[2]
+                r_l = math.sqrt(rx * rx + ry * ry + rz * rz) * d_l
+                ok, kd, km, s, c = nee_factors(wo, wi, nrm, g, p_r * d_l * d_l, scale, delta,
+                                               ok, wd, wm, a2)
             else:
                 wi, p_l, scale, delta, finite, target, ok = sample_light(
                     light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, p[0], p[1], p[2],
@@ -462,16 +511,26 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
                                                a2)
             if ok:
                 row = s_l_row[k]
-                if moving:  # the light's spectrum at λ_lab′ = D_out λ_rest, times D_out⁵
-                    lshift = math.log(d_out) * INV_DLOG if s_shift else 0.0
+                if moving or ls >= 0:  # the light's spectrum at D_l λ, times D_l⁵: at a
+                    # moving vertex D_l = D_out (λ_lab′ = D_out λ_rest), towards a moving
+                    # light D_l = D_e (λ_rest = D_e λ_lab)
+                    lshift = math.log(d_l) * INV_DLOG if s_shift else 0.0
                     if s_beam:
-                        c *= d_out * d_out * d_out * d_out * d_out
+                        c *= d_l * d_l * d_l * d_l * d_l
                     for j in range(nlanes):
                         sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
                             * lerp_at(s_emit, row, lamu[pi, j] + lshift, top)
-                    so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
-                    so, sd, st = shadow_ray_from(so, target, wi, finite)
-                    sh_t0[n_sh] = t_ev + dt_o
+                    if moving:
+                        so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
+                        so, sd, st = shadow_ray_from(so, target, wi, finite)
+                        sh_t0[n_sh] = t_ev + dt_o
+                    else:  # towards the moving light's emission event, r_l away along wi
+                        # (its lab point; the lifted target keeps the ray short of the
+                        # light also from the offset origin)
+                        target_lab = (p[0] + wi[0] * r_l, p[1] + wi[1] * r_l,
+                                      p[2] + wi[2] * r_l)
+                        so, sd, st = shadow_ray(p, g, eps, target_lab, wi, True)
+                        sh_t0[n_sh] = t_ev
                 else:
                     if e_row[pi] != row:  # the light's spectrum, cached per path
                         e_row[pi] = row
@@ -497,6 +556,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
             thr[pi, j] *= lane_weight(weight, rho_j[j])
         prev_pdf[pi] = pdf
         prev_delta[pi] = 1 if delta else 0
+        prev_moving[pi] = 1 if moving else 0
         if moving:  # back into the lab: wi and D_out; the pdf per lab solid angle
             wlx, wly, wlz, d_out = aberrate_doppler_ray(wi[0], wi[1], wi[2], sh[0], sh[1],
                                                         sh[2], sb, sig)
@@ -594,7 +654,8 @@ _TRACE_BUFFERS = (("L", 4, np.float32), ("thr", 4, np.float32), ("prev_pdf", 0, 
                   ("sh_o", 3, np.float32), ("sh_d", 3, np.float32), ("sh_t", 0, np.float32),
                   ("sh_c", 4, np.float32), ("li", 4, np.int32), ("lf", 4, np.float32),
                   ("e_row", 0, np.int32), ("e_val", 4, np.float32), ("lamu", 4, np.float32),
-                  ("rt", 0, np.float64), ("sh_t0", 0, np.float64), ("seg", 0, np.int32))
+                  ("rt", 0, np.float64), ("sh_t0", 0, np.float64), ("seg", 0, np.int32),
+                  ("prev_moving", 0, np.int32))
 
 
 def wavefront_buffers(n: int, keep: dict | None = None,
@@ -633,7 +694,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     b = wavefront_buffers(n, buffers)
     b["moving"] = (buffers if buffers is not None else {}).setdefault("moving", {})
     paths = Paths(keys, b["L"], b["thr"], b["li"], b["lf"], b["prev_pdf"], b["prev_delta"],
-                  b["e_row"], b["e_val"], b["lamu"])
+                  b["e_row"], b["e_val"], b["lamu"], b["prev_moving"])
+    paths.prev_moving[:] = 0
     start_paths(paths.L, paths.thr, paths.prev_pdf, paths.prev_delta, b["idx"], paths.e_row)
     paths.lamu[:] = lamu
     # shade compacts the rays in place: float32 C-contiguous inputs are used (and

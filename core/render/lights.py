@@ -7,12 +7,19 @@ estimate with a uniform share (:func:`selection_pmf`), then a point or direction
 | kind | sample | pdf (solid angle at the shading point x) | radiance term |
 |---|---|---|---|
 | triangle | uniform point y | p_sel · |x-y|² / (A |cos θ_y|) | L_e(λ) of its material |
+| moving triangle | as triangle, at rest | rest-frame pdf · D_e² | D_e⁵ L_e(D_e λ) |
 | point | its position | delta (p_sel) | I(λ)/r², I = P/(4π) (Blender's W) |
 | spot | its position | delta | point × smoothstep cone mask (size, blend) |
 | sun | its direction | delta | E(λ), the irradiance in W/m² |
 | sky | uniform sphere | p_sel / (4π) | the background's L(λ) |
 
-Positions are in the accelerator's local coordinates (lab minus ``Accel.origin``).
+Positions are in the accelerator's local coordinates (lab minus ``Accel.origin``). An
+emissive triangle of a moving object with one inertial segment (a constant velocity) is
+a triangle light whose ``seg`` names that segment: next-event estimation samples it in
+the object's rest frame from the shading event seen there (the light-travel time is then
+the rest-frame distance), and turns the direction, the pdf and the spectrum into the lab
+(integrator.shade; physics.md, "Emitters on moving objects"). Emitters on worldlines of
+several segments are reached by BSDF sampling only.
 Spectral shapes are rows of :class:`materials.SpectralTables` ``emit``.
 
 :func:`sample_light` draws the direction to a light as the table says (from the
@@ -50,6 +57,7 @@ class LightTable:
     tri_pmf: np.ndarray  # float32 (T,) selection probability of each emissive triangle
     sky_pmf: float
     sky_row: int
+    seg: np.ndarray | None = None  # int32 (K,): a moving triangle's segment, else -1
 
     @property
     def count(self) -> int:
@@ -74,8 +82,10 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
     # NEE would have to solve for the emission event on their worldline), so they are
     # not in the table and their hits keep the MIS weight 1
     tri_group = getattr(scene, "tri_group", None)
-    static = emit_rows >= 0 if tri_group is None else (emit_rows >= 0) & (tri_group == 0)
-    for t in np.flatnonzero(static):
+    segment_of = _light_segments(scene)  # per triangle: its segment, -1 static, -2 none
+    usable = emit_rows >= 0 if tri_group is None else (emit_rows >= 0) & (segment_of > -2)
+    segs = []
+    for t in np.flatnonzero(usable):
         m = scene.material_ids[t]
         sides = 1.0 if tables.mat_one_sided[m] else 2.0
         p = area[t] * math.pi * sides * lum[emit_rows[t]]
@@ -83,6 +93,7 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
             continue
         kinds.append(TRIANGLE), prims.append(t), pos.append((0, 0, 0)), dirs.append((0, 0, 1))
         rows.append(emit_rows[t]), scales.append(1.0), spots.append((0, 0)), power.append(p)
+        segs.append(int(segment_of[t]) if tri_group is not None else -1)
     for light in scene.lights:
         row = tables.add_emission_row(light_spectrum(light.color, mode))
         y = row_luminance(tables.emit[row], mode)
@@ -99,7 +110,7 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
             raise ValueError(f"light type {light.type!r} must be converted to geometry first")
         if est <= 0.0:
             continue
-        kinds.append(kind), prims.append(-1)
+        kinds.append(kind), prims.append(-1), segs.append(-1)
         pos.append(np.asarray(light.position, np.float64) - origin)
         dirs.append(np.asarray(light.direction, np.float64))
         rows.append(row), scales.append(scale), spots.append((cos_half, smooth)), power.append(est)
@@ -108,6 +119,7 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
         sky_row = tables.add_emission_row(light_spectrum(scene.background, mode))
         est = row_luminance(tables.emit[sky_row], mode) * 4.0 * math.pi**2 * radius**2
         kinds.append(SKY), prims.append(-1), pos.append((0, 0, 0)), dirs.append((0, 0, 1))
+        segs.append(-1)
         rows.append(sky_row), scales.append(1.0), spots.append((0, 0)), power.append(est)
     pmf = selection_pmf(np.asarray(power, np.float64))
     cdf = np.concatenate([[0.0], np.cumsum(pmf)])
@@ -121,7 +133,21 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
     return LightTable(kinds_a, prims_a, np.asarray(pos, np.float32).reshape(-1, 3),
                       np.asarray(dirs, np.float32).reshape(-1, 3), np.asarray(rows, np.int32),
                       np.asarray(scales, np.float32), np.asarray(spots, np.float32).reshape(-1, 2),
-                      cdf, tri_pmf, sky_pmf, sky_row)
+                      cdf, tri_pmf, sky_pmf, sky_row, np.asarray(segs, np.int32))
+
+
+def _light_segments(scene) -> np.ndarray:
+    """Per triangle, the segment (numbered over the groups, as the kernels number them)
+    of a moving triangle whose group has one segment; -1 static; -2 on a worldline of
+    several segments (not a light for next-event estimation)."""
+    tri_group = getattr(scene, "tri_group", None)
+    if tri_group is None:
+        return np.full(len(scene.material_ids), -1, np.int32)
+    first, table = 0, [-1]
+    for group in scene.groups:
+        table.append(first if len(group.segments) == 1 else -2)
+        first += len(group.segments)
+    return np.asarray(table, np.int32)[tri_group]
 
 
 def selection_pmf(power: np.ndarray, uniform_share: float = UNIFORM_SHARE) -> np.ndarray:

@@ -191,15 +191,21 @@ class MovingScene:
                 s_max[hit] = 0.0
         return blocked
 
-    def segment_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For the kernels, per segment: unit direction of u (S, 3), |u| (S,), 1/γ (S,)."""
-        segs = [s for g in self.groups for s in g.segments]
+    def segment_table(self) -> tuple[np.ndarray, ...]:
+        """For the kernels, per segment: unit direction of u (S, 3), |u| (S,), 1/γ (S,),
+        and its frame: t_ref (S,), p_ref in accelerator coordinates (S, 3), the origin of
+        its group's BVH in rest-frame coordinates (S, 3)."""
+        segs = [(g, s) for g in self.groups for s in g.segments]
         h = np.zeros((len(segs), 3))
         b = np.zeros(len(segs))
         ig = np.ones(len(segs))
-        for i, s in enumerate(segs):
+        t_ref = np.zeros(len(segs))
+        q = np.zeros((len(segs), 3))
+        org = np.zeros((len(segs), 3))
+        for i, (g, s) in enumerate(segs):
             b[i] = float(np.linalg.norm(s.u))
             if b[i] > 0.0:
                 h[i] = s.u / b[i]
             ig[i] = 1.0 / s.gamma
-        return h, b, ig
+            t_ref[i], q[i], org[i] = s.t_ref, s.p_ref - self.lab_origin, g.accel.origin
+        return h, b, ig, t_ref, q, org
