@@ -423,6 +423,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
             rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb, sig)
             dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
             k5, cols = frame_change(d_u, s_shift, s_beam)
+            # (this loop and the one where the path leaves the body stay in shade: a
+            # device function looping over the path arrays would cost reference counts)
             for j in range(nlanes):
                 thr[pi, j] *= k5
                 lamu[pi, j] += cols
