@@ -529,6 +529,10 @@ class ExportedScene:
     lights: list[core_job.LightSpec]  # as a job's [[lights]]: area lights too (quads in scene)
     seconds: float = 0.0
     instances: int = 0
+    #: the moving objects the export put in velocity groups, by name: (velocity, pivot),
+    #: world axes; ``moving_instances``: the names of moving objects seen as instances
+    moving: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    moving_instances: set[str] = field(default_factory=set)
 
 
 @dataclass
@@ -586,6 +590,9 @@ def object_motion(obj_eval, matrix: np.ndarray) -> ObjectSpec | None:
     u = np.array(settings.velocity, np.float64)
     if not np.any(u):
         return None
+    if not np.all(np.isfinite(u)):
+        raise ExportError(f"object '{obj_eval.name}': its velocity {tuple(u.tolist())} is not "
+                          "finite")
     speed = float(np.linalg.norm(u))
     if not speed < 1.0:
         raise ExportError(f"object '{obj_eval.name}': its velocity |v| = {speed:.6g} must be "
@@ -623,6 +630,8 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
     b = _Builder(warnings)
     lights: list[core_job.LightSpec] = []
     cache: dict[tuple, tuple[MeshArrays, list]] = {}
+    moving: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    moving_instances: set[str] = set()
     count = 0
     for inst in depsgraph.object_instances:
         count += 1
@@ -657,7 +666,13 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
                              for i in range(max(len(mats), 1))], np.int32)
         idx = np.clip(arrays.material_index, 0, len(slot_ids) - 1)
         tris, normals = transform(arrays, matrix)
-        b.add(tris, normals, slot_ids[idx], object_motion(obj, matrix))
+        motion = object_motion(obj, matrix)
+        if motion is not None:
+            if inst.is_instance:
+                moving_instances.add(obj.original.name)
+            else:
+                moving[obj.original.name] = (np.array(motion.velocity), np.array(motion.pivot))
+        b.add(tris, normals, slot_ids[idx], motion)
 
     empty = np.zeros((0, 3, 3))
     tri_group, groups = b.moving_groups()
@@ -673,4 +688,5 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
     by_material = {m.name: core_scene.triangles[core_scene.material_ids == i]
                    for i, m in enumerate(core_scene.materials)}
     return ExportedScene(core_scene, camera, width, height, warnings, by_material, lights,
-                         seconds=time.perf_counter() - t0, instances=count)
+                         seconds=time.perf_counter() - t0, instances=count, moving=moving,
+                         moving_instances=moving_instances)

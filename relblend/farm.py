@@ -247,16 +247,16 @@ def patch_materials(doc: dict[str, Any], specs: dict[str, Any], drop: set[str]) 
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
-def moving_objects(scene) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Renderable mesh objects with a velocity: name -> (velocity, world location)."""
-    out = {}
-    for obj in scene.objects:
-        if obj.type != "MESH" or obj.hide_render:
-            continue
-        u = np.array(obj.relray.velocity, np.float64)
-        if np.any(u):
-            out[obj.name] = (u, np.array(obj.matrix_world.translation, np.float64))
-    return out
+def moving_objects(exported: export.ExportedScene) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The moving objects the engine's export put in velocity groups: name -> (velocity,
+    pivot), world axes. The same set F12 renders (render visibility, view layer,
+    collections), so the farm job moves exactly what F12 moves. A moving object seen as
+    an instance (collection instance, instancing) is an error: its glb node is not its own."""
+    if exported.moving_instances:
+        name = sorted(exported.moving_instances)[0]
+        raise FarmExportError(f"moving object '{name}' is rendered as an instance, which the "
+                              "farm export cannot give a velocity; make it a real object")
+    return dict(exported.moving)
 
 
 def patch_motion(doc: dict[str, Any], moving: dict[str, tuple[np.ndarray, np.ndarray]]) -> int:
@@ -428,9 +428,9 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
             export_image_format="NONE", export_yup=True, export_extras=False)
     specs = {m.name: m for m in exported.scene.materials}
     special = {m.name for m in exported.scene.materials if m.emission_blackbody is not None}
-    moving = moving_objects(scene)
+    moving = moving_objects(exported)
     for name in moving:
-        hot = {slot.material.name for slot in scene.objects[name].material_slots
+        hot = {slot.material.name for slot in bpy.data.objects[name].material_slots
                if slot.material is not None} & special
         if hot:
             raise FarmExportError(f"moving object '{name}' has the blackbody material "

@@ -90,6 +90,28 @@ def test_the_farm_job_renders_the_moving_sphere_as_f12_does(ext, engine, tmp_pat
     assert abs(coverage_column(rgba)[0] - coverage_column(in_blender)[0]) < 0.5
 
 
+def test_the_farm_export_moves_what_f12_moves(ext, engine, tmp_path):
+    """Only the moving objects F12 renders get ``extras.relray``: a moving cube in a
+    collection excluded from the view layer is no error and no moving node."""
+    scene = moving_ball_scene((0.5, 0.0, 0.0))
+    hidden = bpy.data.collections.new("hidden")
+    scene.collection.children.link(hidden)
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(3.0, D, 0.0))
+    cube = bpy.context.active_object
+    cube.name = "cube"
+    for c in list(cube.users_collection):
+        c.objects.unlink(cube)
+    hidden.objects.link(cube)
+    cube.relray.velocity = (0.0, 0.0, 0.3)
+    bpy.context.view_layer.layer_collection.children["hidden"].exclude = True
+    out = tmp_path / "farm"
+    assert bpy.ops.relray.export_farm(directory=str(out)) == {"FINISHED"}
+    farm = ext_module("relblend.farm")
+    gl, _ = farm.read_glb(out / "scene.glb")
+    moving = sorted(n.get("name") for n in gl["nodes"] if "relray" in n.get("extras", {}))
+    assert moving == ["ball"]
+
+
 def test_a_velocity_at_or_above_c_stops_the_render(ext, engine):
     scene = moving_ball_scene((0.8, 0.7, 0.0))  # each component < 1, |v| = 1.063
     with pytest.raises(RuntimeError, match=r"object 'ball': its velocity \|v\| = 1\.06"):
