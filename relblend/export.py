@@ -533,6 +533,9 @@ class ExportedScene:
     #: world axes; ``moving_instances``: the names of moving objects seen as instances
     moving: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     moving_instances: set[str] = field(default_factory=set)
+    #: the names of the objects the view layer evaluates (themselves, instancers or
+    #: instances: F12 renders no other object; the farm export leaves the rest out)
+    rendered: set[str] = field(default_factory=set)
 
 
 @dataclass
@@ -632,12 +635,14 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
     cache: dict[tuple, tuple[MeshArrays, list]] = {}
     moving: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     moving_instances: set[str] = set()
+    rendered: set[str] = set()
     count = 0
     for inst in depsgraph.object_instances:
         count += 1
         if test_break is not None and count % 2000 == 0 and test_break():
             raise InterruptedError("export cancelled")
         obj = inst.object
+        rendered.add(obj.original.name)  # evaluated at all (instancers, hidden parents)
         if not inst.show_self or (not inst.is_instance and obj.original.hide_render):
             continue
         matrix = matrix_np(inst.matrix_world)  # copy now: the item dies after this step
@@ -689,4 +694,4 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
                    for i, m in enumerate(core_scene.materials)}
     return ExportedScene(core_scene, camera, width, height, warnings, by_material, lights,
                          seconds=time.perf_counter() - t0, instances=count, moving=moving,
-                         moving_instances=moving_instances)
+                         moving_instances=moving_instances, rendered=rendered)

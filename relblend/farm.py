@@ -14,14 +14,16 @@ Layout of the export directory::
 What goes where, and why:
 
 ==================  ========================================================================
-scene.glb           triangles of every renderable mesh object. Materials: the exporter's
+scene.glb           triangles of every mesh object F12 renders (objects the view layer does
+                    not evaluate, e.g. in excluded collections, are hidden from the glTF
+                    exporter, whose ``use_renderable`` keeps them). Materials: the exporter's
                     output is overwritten with the add-on's factors (base colour,
                     metallic, roughness, emission colour in [0, 1] with the scale in
                     KHR_materials_emissive_strength, transmission, IOR; textures dropped:
                     both renders use an image's mean colour)
 [[materials]],      blackbody emitters (removed from the glb, written as PLY meshes)
 [[objects]]
-moving objects      a mesh object with ``object.relray.velocity`` ≠ 0: its glb node gets
+moving objects      an object F12 moves (``object.relray.velocity`` ≠ 0): its glb node gets
                     ``extras.relray = {velocity, pivot}`` (glTF's Y-up axes; the pivot is
                     its world location at the exported frame), as the core reads moving
                     glTF nodes. A moving object must be a node of its own (not an
@@ -162,6 +164,23 @@ def render_modifier_settings(scene) -> Iterator[None]:
     finally:
         for mod, attr, value in reversed(saved):
             setattr(mod, attr, value)
+
+
+@contextmanager
+def hidden_unless_rendered(scene, rendered: set[str]) -> Iterator[None]:
+    """Hide from render, while glTF exports, the scene's objects that F12 does not render
+    (``rendered``: the engine export's names), e.g. those of collections excluded from the
+    view layer, which the glTF exporter's ``use_renderable`` still writes."""
+    saved = []
+    try:
+        for obj in scene.objects:
+            if obj.name not in rendered and not obj.hide_render:
+                saved.append(obj)
+                obj.hide_render = True
+        yield
+    finally:
+        for obj in saved:
+            obj.hide_render = False
 
 
 # ---------------------------------------------------------------------------- GLB
@@ -422,10 +441,12 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
     with render_modifier_settings(scene):
         depsgraph = context.evaluated_depsgraph_get()
         exported = export.export_scene(depsgraph, cam)
-        bpy.ops.export_scene.gltf(
-            filepath=str(glb), export_format="GLB", use_renderable=True, export_apply=True,
-            export_lights=False, export_cameras=False, export_animations=False,
-            export_image_format="NONE", export_yup=True, export_extras=False)
+        with hidden_unless_rendered(scene, exported.rendered):
+            bpy.ops.export_scene.gltf(
+                filepath=str(glb), export_format="GLB", use_renderable=True,
+                export_apply=True, export_lights=False, export_cameras=False,
+                export_animations=False, export_image_format="NONE", export_yup=True,
+                export_extras=False)
     specs = {m.name: m for m in exported.scene.materials}
     special = {m.name for m in exported.scene.materials if m.emission_blackbody is not None}
     moving = moving_objects(exported)

@@ -92,7 +92,8 @@ def test_the_farm_job_renders_the_moving_sphere_as_f12_does(ext, engine, tmp_pat
 
 def test_the_farm_export_moves_what_f12_moves(ext, engine, tmp_path):
     """Only the moving objects F12 renders get ``extras.relray``: a moving cube in a
-    collection excluded from the view layer is no error and no moving node."""
+    collection excluded from the view layer is no error and not in the glb at all (the
+    glTF exporter's ``use_renderable`` writes it; F12 does not render it)."""
     scene = moving_ball_scene((0.5, 0.0, 0.0))
     hidden = bpy.data.collections.new("hidden")
     scene.collection.children.link(hidden)
@@ -110,6 +111,8 @@ def test_the_farm_export_moves_what_f12_moves(ext, engine, tmp_path):
     gl, _ = farm.read_glb(out / "scene.glb")
     moving = sorted(n.get("name") for n in gl["nodes"] if "relray" in n.get("extras", {}))
     assert moving == ["ball"]
+    assert "cube" not in {n.get("name") for n in gl["nodes"]}
+    assert not bpy.data.objects["cube"].hide_render  # restored after the export
 
 
 def test_a_velocity_at_or_above_c_stops_the_render(ext, engine):
