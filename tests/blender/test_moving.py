@@ -59,10 +59,15 @@ def coverage_column(rgba: np.ndarray) -> tuple[float, float]:
 
 
 def test_f12_shows_the_moving_sphere_where_its_light_left_it(ext, engine):
-    """At rest the ball is in the middle; moving at 0.5 c along +x it is seen 60.378° from
-    -x (physics.md's Penrose–Terrell row): the image plane's x = -cot 60.378° = -0.569,
-    column 10.35 of 48. The coverage centroid of a small circle seen off-axis lies within
-    a pixel of its centre's projection (1.5 px allowed)."""
+    """At rest the ball is in the middle; moving at u = 0.5 c along +x it is seen where its
+    light left it. Its centre is at (u t, D) at lab time t; the light reaching the camera
+    at t = 0 left at t_e < 0 with (-t_e)² = (u t_e)² + D², so t_e = -γD and the centre was
+    at x = -uγD: the centre's ray comes from the direction (-u, 1/γ), 60° from -x (tan =
+    -uγ = -0.577 on the image plane). The finite sphere's outline is a circle centred
+    60.378° from -x (physics.md's Penrose–Terrell row: aberration moves the centre of a
+    10° circle by 0.378°): the image plane's x = -cot 60.378° = -0.569, column 10.35 of
+    48 (the static ball: column 24). The coverage centroid of a small circle seen off-axis
+    lies within a pixel of its centre's projection (1.5 px allowed)."""
     for velocity, column in (((0.0, 0.0, 0.0), SIZE / 2),
                              ((0.5, 0.0, 0.0), (1.0 - 1.0 / math.tan(math.radians(60.378)))
                               * SIZE / 2)):
@@ -118,6 +123,16 @@ def test_the_farm_export_moves_what_f12_moves(ext, engine, tmp_path):
 def test_a_velocity_at_or_above_c_stops_the_render(ext, engine):
     scene = moving_ball_scene((0.8, 0.7, 0.0))  # each component < 1, |v| = 1.063
     with pytest.raises(RuntimeError, match=r"object 'ball': its velocity \|v\| = 1\.06"):
+        rendering.render_still(scene)
+
+
+def test_a_non_finite_velocity_stops_the_render(ext, engine):
+    scene = moving_ball_scene((0.0, 0.0, 0.0))
+    ball = scene.objects["ball"]
+    ball.relray.velocity = (float("nan"), 0.0, 0.0)
+    if math.isfinite(ball.relray.velocity[0]):
+        pytest.skip("this Blender does not store a NaN in the property")
+    with pytest.raises(RuntimeError, match=r"object 'ball': its velocity .* is not finite"):
         rendering.render_still(scene)
 
 
