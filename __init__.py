@@ -20,7 +20,10 @@ def cli_main() -> int:
     extension module's initialisation turns into an ImportError traceback, or leaves
     CPython's "unhandled KeyboardInterrupt" mark that makes it kill itself by SIGINT at
     exit; the command then ends with "relray: interrupted" and exit code 130. During the
-    run the signal interrupts (130 again). Once the command has finished the signals are
+    run the signal interrupts (130 again). A KeyboardInterrupt that a callback swallows
+    (numba's JIT calls back into Python through ctypes, which can only print "Exception
+    ignored") is kept silent, and the signal is still remembered: a run that then
+    finishes ends "interrupted", 130. Once the command has finished the signals are
     ignored (SIG_IGN, which the interpreter's finalisation keeps), so the process never
     dies by one. Everything else is :func:`relray.core.cli.main`.
     """
@@ -31,10 +34,18 @@ def cli_main() -> int:
     held: list[int] = []
 
     def on_signal(signum, frame):
-        if phase == "start-up":
+        if phase != "finished":
             held.append(signum)
-        elif phase == "run":
+        if phase == "run":
             raise KeyboardInterrupt
+
+    unraisable = sys.unraisablehook
+
+    def quiet_interrupts(info):
+        if not issubclass(info.exc_type, KeyboardInterrupt):
+            unraisable(info)
+
+    sys.unraisablehook = quiet_interrupts
 
     stop_signals = [getattr(signal, n) for n in _STOP_SIGNALS if hasattr(signal, n)]
     for sig in stop_signals:
@@ -46,6 +57,8 @@ def cli_main() -> int:
         if held:
             raise KeyboardInterrupt
         code = cli.main()
+        if held and code != 130:  # the interrupt was swallowed by a callback
+            raise KeyboardInterrupt
     except KeyboardInterrupt:
         code = 130
         try:

@@ -187,13 +187,16 @@ def check_farm_options(args: argparse.Namespace) -> None:
 @contextlib.contextmanager
 def interrupts(cancel: threading.Event) -> Iterator[None]:
     """SIGINT, SIGTERM and SIGHUP set ``cancel`` and raise KeyboardInterrupt (main thread
-    only)."""
+    only), after calling the handler they replace (if it is a Python function)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def handler(signum, frame):
         cancel.set()
+        previous = old.get(signum)
+        if callable(previous):  # relray.cli_main's: it remembers the signal too
+            previous(signum, frame)
         raise KeyboardInterrupt
 
     names = ("SIGINT", "SIGTERM", "SIGHUP", "SIGBREAK")
