@@ -47,6 +47,9 @@ IGNORED = {("Job", "path"), ("RenderSettings", "threads"), ("OutputSettings", "d
            ("OutputSettings", "name"), ("Job", "motion")}
 """(class, field) pairs left out of :func:`job_digest`: they do not change a frame's
 pixels (``Job.motion``: only through the frame's event, in :func:`frame_digest`)."""
+OMITTED_IF_NONE = {("ShutterEvent", "rotation")}
+"""(class, field) pairs left out while None (the default): added after digests were
+recorded, they keep the digests of frames rendered before them valid."""
 METADATA_KEY = "relray:digest"
 
 
@@ -61,6 +64,8 @@ def canonical(value: Any) -> Any:
         name = type(value).__name__
         out: dict[str, Any] = {"type": name}
         for f in dataclasses.fields(value):
+            if (name, f.name) in OMITTED_IF_NONE and getattr(value, f.name) is None:
+                continue  # a field added later: digests from before it stay valid
             if (name, f.name) not in IGNORED:
                 out[f.name] = canonical(getattr(value, f.name))
         return out

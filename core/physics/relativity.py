@@ -320,6 +320,8 @@ class ShutterEvent:
     in the lab at the event, (3,); the frame is rendered in the instantaneous comoving
     inertial frame, i.e. boosted by ``lorentz_boost(beta)`` from the lab. ``tau``: the
     camera's proper time ct' at the event (0 at the start of the worldline).
+    ``rotation``: the camera's axes at the event, (3, 3) columns right, up, backward (as
+    ``PinholeCamera.rotation``), or None for the job's fixed ``[camera]``.
     Arrays are stored as read-only float64 copies. (``eq=False``: events with array
     fields are compared with numpy, not ``==``.)
     """
@@ -328,8 +330,13 @@ class ShutterEvent:
     x: np.ndarray
     beta: np.ndarray
     tau: float
+    rotation: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        if self.rotation is not None:
+            r = np.array(self.rotation, np.float64).reshape(3, 3)
+            r.flags.writeable = False
+            object.__setattr__(self, "rotation", r)
         x = _as_vector3(self.x, "x").copy()
         beta = _as_vector3(self.beta, "beta").copy()
         _checked_speed(beta)

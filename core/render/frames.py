@@ -281,7 +281,9 @@ class FrameRenderer:
         pix.reshape(len(pixels), n_s)[:] = pixels[:, None]
         samp.reshape(len(pixels), n_s)[:] = np.arange(s0, s1, dtype=np.int64)
         keys = path_keys(s.seed, frame, pix, samp)
-        o_local, d_lab, D, skipped = self.camera.primary_rays(
+        camera = self.camera if event.rotation is None else \
+            replace(self.camera, rotation=event.rotation)
+        o_local, d_lab, D, skipped = camera.primary_rays(
             event.beta, keys, pix, np.asarray(event.x, np.float64) - prep.origin,
             prep.radius)
         lanes = (b["lam"], b["pdf"], b["lamu"], b["w_d"])

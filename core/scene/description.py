@@ -23,7 +23,7 @@ from ..physics.spectrum import MODES as SPECTRAL_MODES
 
 OUTPUT_FORMATS = ("exr", "png", "spectral-exr")
 AOV_NAMES = ("depth", "doppler", "lab_time")
-MOTION_MODES = ("snapshot", "worldline")
+MOTION_MODES = ("snapshot", "worldline", "events")
 SHAPES = ("sphere", "box", "quad", "mesh")
 LIGHT_TYPES = ("point", "spot", "sun", "area")
 #: Largest magnitude of any number in a scene (job keys, mesh and glTF coordinates). The
@@ -104,6 +104,9 @@ class MotionSettings:
     ct_per_frame: float = 0.0
     keyframes: tuple[tuple[int, np.ndarray], ...] = ()
     proper_acceleration: np.ndarray | None = None
+    #: mode "events": the shutter event of every frame, {frame: ShutterEvent}, baked from
+    #: an animation (lab time, position, velocity, proper time and the camera's axes)
+    events: tuple = ()
     render_frames: tuple[int, int] | None = None  # --frames: a sub-range to render
 
 

@@ -67,6 +67,7 @@ import numpy as np
 from .. import resources
 from ..errors import UserError
 from ..files import MAX_TEXT_BYTES, check_readable, read_input, resolve_path
+from ..physics import relativity
 from . import gltf, schema, shapes, worldlines
 from .description import (
     CameraSettings,
@@ -288,6 +289,7 @@ def _motion(m: schema.Motion, ctx: _Ctx) -> MotionSettings:
             raise ctx.error("proper_acceleration", "give keyframes or proper_acceleration, "
                             "not both")
         accel = frozen(m.proper_acceleration)
+    events = _events(m, ctx)
     motion = MotionSettings(
         mode=m.mode,
         beta=frozen(m.beta),
@@ -296,10 +298,40 @@ def _motion(m: schema.Motion, ctx: _Ctx) -> MotionSettings:
         ct_per_frame=m.ct_per_frame,
         keyframes=tuple(keyframes),
         proper_acceleration=accel,
+        events=events,
     )
     if accel is not None:
         _check_acceleration(motion, ctx)
     return motion
+
+def _events(m: schema.Motion, ctx: _Ctx) -> tuple:
+    """``motion.events`` as (frame, ShutterEvent) pairs: mode "events" only, one per frame
+    of ``frames``, sorted without repeats (the camera's axes: ``rotation`` or None)."""
+    if m.mode != "events":
+        if m.events:
+            raise ctx.error("events", "needs mode = \"events\"")
+        return ()
+    if m.keyframes:
+        raise ctx.error("keyframes", "not with mode = \"events\" (each event has its beta)")
+    out: list[tuple[int, relativity.ShutterEvent]] = []
+    for i, e in enumerate(m.events):
+        if out and e.frame <= out[-1][0]:
+            raise ctx.sub(f"events[{i}]").error(
+                "frame", f"events must be sorted by frame, without repeats (frame {e.frame} "
+                f"follows frame {out[-1][0]})")
+        rotation = None if e.rotation is None else _nearest_rotation(_vec(e.rotation))
+        out.append((e.frame, relativity.ShutterEvent(
+            t=e.t, x=_vec(e.position), beta=_vec(e.beta), tau=e.tau, rotation=rotation)))
+    first, last = m.frames
+    have = [f for f, _ in out]
+    if have != list(range(first, last + 1)):
+        missing = sorted(set(range(first, last + 1)) - set(have))
+        what = (f"frame {missing[0]} has no event" if missing
+                else f"frame {sorted(set(have) - set(range(first, last + 1)))[0]} is outside "
+                     f"frames = [{first}, {last}]")
+        raise ctx.error("events", f"one event per frame of frames = [{first}, {last}]: {what}")
+    return tuple(out)
+
 
 #: Largest rapidity reached under constant acceleration: tanh(18) = 1 - 4.6e-16 < 1.
 MAX_RAPIDITY = 18.0
@@ -711,6 +743,10 @@ def with_overrides(
     if threads is not None:
         render = replace(render, threads=_threads(option(schema.Render, "threads", threads),
                                                   ctx, "--threads"))
+    if motion.mode == "events" and (beta is not None or ct is not None):
+        raise UserError("the job's motion is baked (mode = \"events\"): every frame has its "
+                        "own beta and ct", key="--beta" if beta is not None else "--ct",
+                        file=job.path)
     if beta is not None:
         motion = replace(motion, beta=frozen(option(schema.Motion, "beta", beta)),
                          keyframes=())
@@ -779,7 +815,10 @@ def job_summary(job: Job) -> str:
         f"motion      {m.mode}, frames {first}..{last}, ct {m.ct:g}"
         + (f" + {m.ct_per_frame:g} per frame" if m.ct_per_frame else "")
     )
-    if m.keyframes:
+    if m.events:
+        lines.append(f"  events    {len(m.events)} baked shutter events (lab time, position, "
+                     "beta, axes per frame)")
+    elif m.keyframes:
         for f, b in m.keyframes:
             lines.append(f"  keyframe  {f}: beta {_fmt_vec(b)} (|beta| {np.linalg.norm(b):.4g})")
     else:

@@ -20,6 +20,9 @@ def frame_events(job: Job) -> list[tuple[int, relativity.ShutterEvent]]:
     """The shutter event of every frame of the job (physics.md, "Camera worldline")."""
     mo = job.motion
     frames = frame_list(job)
+    if mo.mode == "events":
+        by_frame = dict(mo.events)
+        return [(f, by_frame[f]) for f in frames]
     position = np.asarray(camera_settings(job).position, np.float64)
     if mo.mode == "worldline":
         events = relativity.worldline_events(

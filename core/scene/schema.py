@@ -396,12 +396,27 @@ class Keyframe(Table):
     beta: Beta = Field(description="Camera velocity at this frame (lab frame), |beta| < 1.")
 
 
+class CameraEvent(Table):
+    """One entry of ``motion.events``: a frame's shutter event, baked from an animation."""
+
+    needs: ClassVar[str] = "an event needs frame, t, position and beta"
+    frame: FrameNumber = Field(description="Frame number; events sorted, no repeats.")
+    t: Number = Field(description="Lab time ct of the shutter (scene units).")
+    position: Vec3 = Field(description="Lab position of the camera at the shutter.")
+    beta: Beta = Field(description="Camera velocity in the lab at the shutter, |beta| < 1.")
+    tau: Number = Field(0.0, description="The camera's proper time ct' at the shutter.")
+    rotation: _matrix(3, 3, AfterValidator(_rotation_rule)) = Field(
+        None, description="The camera's axes at the shutter (columns right, up, backward); "
+                          "default the [camera]'s.")
+
+
 class Motion(Table):
     """``[motion]``: the camera's velocity and proper time per frame."""
 
     mode: _choice(MOTION_MODES) = Field(
         "snapshot", description="snapshot: each frame at a constant beta; worldline: the path "
-                                "is integrated over proper time.")
+                                "is integrated over proper time; events: every frame's "
+                                "shutter event is given (events).")
     beta: Beta = Field([0.0, 0.0, 0.0], description="Camera velocity in the lab frame "
                                                     "(c = 1), |beta| < 1.")
     ct: Number = Field(0.0, description="Camera proper time of the first frame (scene units).")
@@ -416,6 +431,10 @@ class Motion(Table):
     proper_acceleration: Vec3 = Field(
         None, description="Constant proper acceleration (worldline mode, not with "
                           "keyframes); beta must be parallel to it.")
+    events: Annotated[list[CameraEvent], Expect("an array of tables")] = Field(
+        [], description="mode events: {frame, t, position, beta, tau, rotation} of every "
+                        "frame of frames, sorted (as the Blender add-on bakes an animated "
+                        "camera).")
 
 
 class MotionProfile(Table):
@@ -1122,6 +1141,7 @@ def markdown() -> str:
     sections: list[tuple[str, type[BaseModel], Sequence[str]]] = [
         ("[render]", Render, ()), ("[output]", Output, ()), ("[camera]", Camera, ()),
         ("[motion]", Motion, ()), ("motion.keyframes entries", Keyframe, ()),
+        ("motion.events entries", CameraEvent, ()),
         ("[scene]", Scene, ()), ("[[materials]]", Material, ()),
         ("materials.emission_spectrum", Spectrum, ()),
         ("[[objects]], every shape", Object, ()),
@@ -1163,6 +1183,8 @@ RULES = (
     "`motion.keyframes` sorted by frame without repeats; `proper_acceleration` needs "
     "`mode = \"worldline\"`, excludes `keyframes`, is parallel to `beta` (or `beta` is 0), "
     "and the last frame's rapidity stays below 18.",
+    "`motion.events` (`mode = \"events\"` only, and then required): one per frame of "
+    "`motion.frames`, sorted, no repeats; `beta` and `keyframes` are not used with it.",
     "`materials`: at most one of `emission_blackbody`, `emission_line`, "
     "`emission_spectrum`; `emission_spectrum.nm` and `.values` of the same length, at "
     "least 2; names unique across the job and its includes.",
