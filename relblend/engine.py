@@ -50,6 +50,8 @@ SCRIPT_CANCEL = None
 # plus the worldline clock's inputs; cleared when a render job starts or ends.
 _HISTORY: dict[tuple[str, str], dict[int, np.ndarray]] = {}
 _CLOCK: dict[tuple[str, str], tuple[float, float]] = {}
+# World matrices sampled for motion from the animation, per render job and scene.
+_SAMPLES: dict[str, object] = {}
 # The last prepared scene: (content hash, PreparedScene).
 _PREPARED: list[tuple[str, object]] = []
 
@@ -66,6 +68,7 @@ def clear_caches(*_args) -> None:
     """Forget the motion history and the prepared scene (render job boundaries)."""
     _HISTORY.clear()
     _CLOCK.clear()
+    _SAMPLES.clear()
 
 
 def free_prepared() -> None:
@@ -145,6 +148,8 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         if cam_eval.type != "CAMERA":
             raise export.ExportError(f"the active camera '{cam.name}' is not a camera object")
         settings = cam_eval.data.relray
+        if settings.motion_source == "ANIMATION":
+            return self._setup_animation(depsgraph, cam, frame)
         m = export.matrix_np(cam_eval.matrix_world)
         beta = motion.camera_beta(settings, m, frame)
         position = m[:3, 3].copy()
@@ -157,6 +162,33 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         exported = export.export_scene(depsgraph, cam, self.resolution_x, self.resolution_y,
                                        test_break=self.test_break)
         return FrameSetup(frame, event, exported, motion.gamma_or_zero(event.beta))
+
+    def _setup_animation(self, depsgraph, cam, frame: int) -> FrameSetup:
+        """A camera whose motion is its animation: its event on the scene clock, and the
+        objects that move along their animation (:mod:`.animation`)."""
+        from . import animation, export
+
+        scene = depsgraph.scene
+        clock = scene_clock(scene)
+        names = animated_candidates(depsgraph)
+        samples = _SAMPLES.setdefault(scene.name, animation.Samples({}))
+
+        def matrix_of(name: str):
+            return export.matrix_np(bpy.data.objects[name].evaluated_get(depsgraph).matrix_world)
+
+        try:
+            event, _ = animation.camera_event(samples, cam.name, clock, scene.frame_start,
+                                              frame, self.frame_set, matrix_of)
+            moving = animation.object_motions(samples, names, clock, scene.frame_start,
+                                              scene.frame_end, frame, self.frame_set,
+                                              matrix_of)
+        finally:
+            self.frame_set(frame, 0.0)
+        exported = export.export_scene(depsgraph, cam, self.resolution_x, self.resolution_y,
+                                       test_break=self.test_break, animated=moving)
+        from .motion import gamma_or_zero
+
+        return FrameSetup(frame, event, exported, gamma_or_zero(event.beta))
 
     def _worldline_history(self, depsgraph, cam, frame: int):
         """β (lab) of frames min(start, frame) .. frame - 1, and the worldline clock."""
@@ -309,6 +341,31 @@ def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float) -> Non
 
 #: Seconds from a test_break request to the core stopping, in the last cancelled render.
 LAST_CANCEL_LATENCY: float | None = None
+
+
+def scene_clock(scene):
+    """The scene clock ct = c · frame / fps (:class:`.motion.SceneClock`)."""
+    from .motion import SceneClock
+
+    return SceneClock(float(scene.relray.speed_of_light),
+                      float(scene.render.fps) / float(scene.render.fps_base))
+
+
+def animated_candidates(depsgraph) -> list[str]:
+    """The rendered objects (not instances) whose motion source is their animation."""
+    from .export import GEOMETRY_TYPES
+
+    names = []
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if inst.is_instance or not inst.show_self or obj.type not in GEOMETRY_TYPES:
+            continue
+        orig = obj.original
+        settings = getattr(orig, "relray", None)
+        if not orig.hide_render and settings is not None \
+                and settings.motion_source == "ANIMATION":
+            names.append(orig.name)
+    return names
 
 
 def enabled_passes(view_layer) -> list[str]:

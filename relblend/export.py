@@ -533,6 +533,8 @@ class ExportedScene:
     #: world axes; ``moving_instances``: the names of moving objects seen as instances
     moving: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     moving_instances: set[str] = field(default_factory=set)
+    #: the objects moving along their animation (``animation.ObjectMotion``), by name
+    animated: dict[str, Any] = field(default_factory=dict)
     #: the names of the objects the view layer evaluates (themselves, instancers or
     #: instances: F12 renders no other object; the farm export leaves the rest out)
     rendered: set[str] = field(default_factory=set)
@@ -611,14 +613,32 @@ def _slot_materials(obj_eval) -> list:
     return mats
 
 
+def animated_motion(name: str, motion, warnings: Warnings) -> tuple[np.ndarray, ObjectSpec]:
+    """The world matrix (rest pose at the pivot) and core keys of an object that moves
+    along its animation (``animation.ObjectMotion``)."""
+    if motion.posed:
+        warnings.add(f"object '{name}': its rotation or scale is animated, which a moving "
+                     "object cannot show (it is rigid in its rest frame); it keeps its pose "
+                     "of the start frame")
+    matrix = np.eye(4)
+    matrix[:3, :3] = motion.rest_linear
+    matrix[:3, 3] = motion.pivot
+    return matrix, ObjectSpec(name=name, shape="mesh", material="", params={},
+                              pivot=frozen(motion.pivot), worldline=motion.worldline)
+
+
 def export_scene(depsgraph, camera_obj=None, width: int | None = None,
                  height: int | None = None,
-                 test_break: Callable[[], bool] | None = None) -> ExportedScene:
+                 test_break: Callable[[], bool] | None = None,
+                 animated: dict[str, Any] | None = None) -> ExportedScene:
     """Export the evaluated depsgraph (the render's, or the viewport's) for the core.
 
     ``camera_obj``: the camera object (original or evaluated; default the scene's);
-    ``width``/``height``: the render size (default from the scene's resolution).
+    ``width``/``height``: the render size (default from the scene's resolution);
+    ``animated``: objects that move along their animation, by name
+    (``animation.ObjectMotion``; their own velocity is then ignored).
     """
+    animated = animated or {}
     t0 = time.perf_counter()
     scene = depsgraph.scene
     warnings = Warnings()
@@ -670,9 +690,16 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
         slot_ids = np.array([b.material_id(mats[i] if i < len(mats) else None)
                              for i in range(max(len(mats), 1))], np.int32)
         idx = np.clip(arrays.material_index, 0, len(slot_ids) - 1)
+        name = obj.original.name
+        if not inst.is_instance and name in animated:
+            matrix, motion = animated_motion(name, animated[name], warnings)
+            if np.any(np.asarray(obj.original.relray.velocity)):
+                warnings.add(f"object '{name}': its velocity is ignored: its motion comes "
+                             "from its animation (Object › Relativity › Motion)")
+        else:
+            motion = object_motion(obj, matrix)
         tris, normals = transform(arrays, matrix)
-        motion = object_motion(obj, matrix)
-        if motion is not None:
+        if motion is not None and motion.worldline is None:
             if inst.is_instance:
                 moving_instances.add(obj.original.name)
             else:
@@ -694,4 +721,5 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
                    for i, m in enumerate(core_scene.materials)}
     return ExportedScene(core_scene, camera, width, height, warnings, by_material, lights,
                          seconds=time.perf_counter() - t0, instances=count, moving=moving,
-                         moving_instances=moving_instances, rendered=rendered)
+                         moving_instances=moving_instances, rendered=rendered,
+                         animated=dict(animated))

@@ -132,6 +132,53 @@ def motion_table(mode: str, samples: list[FrameSample]) -> dict[str, Any]:
     }
 
 
+def animation_motion(context, cam, frames: range, width: int, height: int,
+                     warnings: export.Warnings) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A camera whose motion is its animation: the job's [motion] as baked events (each
+    frame's lab time, position, β, proper time and axes, as F12 computes them), and the
+    animated objects' motions at the current frame (:mod:`.animation`)."""
+    import bpy
+
+    from . import animation
+    from .engine import animated_candidates, scene_clock
+
+    scene = context.scene
+    current, subframe = scene.frame_current, scene.frame_subframe
+    clock = scene_clock(scene)
+    samples = animation.Samples({})
+
+    def set_frame(f: int, sub: float) -> None:
+        scene.frame_set(f, subframe=sub)
+
+    def matrix_of(name: str) -> np.ndarray:
+        obj = bpy.data.objects[name].evaluated_get(context.evaluated_depsgraph_get())
+        return export.matrix_np(obj.matrix_world)
+
+    events, fovs = [], set()
+    try:
+        names = animated_candidates(context.evaluated_depsgraph_get())
+        for f in frames:
+            ev, m = animation.camera_event(samples, cam.name, clock, scene.frame_start, f,
+                                           set_frame, matrix_of)
+            scene.frame_set(f)
+            cam_eval = cam.evaluated_get(context.evaluated_depsgraph_get())
+            settings = export.camera_settings(cam_eval, width, height, scene.render, warnings)
+            fovs.add((round(settings.fov, 9), tuple(round(x, 9) for x in settings.shift)))
+            events.append({"frame": f, "t": ev.t, "position": ev.x.tolist(),
+                           "beta": ev.beta.tolist(), "tau": ev.tau,
+                           "rotation": np.asarray(settings.rotation).tolist()})
+        moving = animation.object_motions(samples, names, clock, scene.frame_start,
+                                          scene.frame_end, current, set_frame, matrix_of)
+    finally:
+        scene.frame_set(current, subframe=subframe)
+    if len(fovs) > 1:
+        raise FarmExportError("the camera's lens (field of view or shift) changes over the "
+                              "frames; a job has one lens: export frame ranges where it is "
+                              "constant")
+    doc = {"mode": "events", "frames": [frames[0], frames[-1]], "events": events}
+    return doc, moving
+
+
 def check_static_camera(samples: list[FrameSample], tol: float = 1e-6) -> None:
     """A job has one camera pose: refuse a camera that moves or turns over the frames."""
     ref = samples[0].matrix
@@ -275,21 +322,30 @@ def moving_objects(exported: export.ExportedScene) -> dict[str, tuple[np.ndarray
         name = sorted(exported.moving_instances)[0]
         raise FarmExportError(f"moving object '{name}' is rendered as an instance, which the "
                               "farm export cannot give a velocity; make it a real object")
-    return dict(exported.moving)
+    return {**exported.moving, **exported.animated}
 
 
-def patch_motion(doc: dict[str, Any], moving: dict[str, tuple[np.ndarray, np.ndarray]]) -> int:
-    """Write each moving object's ``extras.relray`` on its glb node (by name); returns
-    how many nodes were patched. An object without a node of its own is an error."""
+def patch_motion(doc: dict[str, Any], moving: dict[str, Any]) -> int:
+    """Write each moving object's ``extras.relray`` on its glb node (by name): (velocity,
+    pivot), or an ``animation.ObjectMotion`` (its worldline); returns how many nodes were
+    patched. An object without a node of its own is an error."""
     nodes = {n.get("name"): n for n in doc.get("nodes", [])}
     missing = sorted(set(moving) - set(nodes))
     if missing:
         raise FarmExportError(f"moving object '{missing[0]}' has no node of its own in the "
                               "exported glTF (an instance?); make it a real object")
-    for name, (u, pivot) in moving.items():
+    for name, value in moving.items():
         extras = nodes[name].setdefault("extras", {})
-        extras["relray"] = {"velocity": (Z_UP_TO_Y_UP @ u).tolist(),
-                            "pivot": (Z_UP_TO_Y_UP @ pivot).tolist()}
+        if isinstance(value, tuple):
+            u, pivot = value
+            extras["relray"] = {"velocity": (Z_UP_TO_Y_UP @ u).tolist(),
+                                "pivot": (Z_UP_TO_Y_UP @ pivot).tolist()}
+        else:  # an animation.ObjectMotion
+            w = value.worldline
+            extras["relray"] = {
+                "pivot": (Z_UP_TO_Y_UP @ value.pivot).tolist(),
+                "worldline": {"t": [float(t) for t in w.t],
+                              "pivot": (np.asarray(w.pivot) @ Z_UP_TO_Y_UP.T).tolist()}}
     return len(moving)
 
 
@@ -432,21 +488,26 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
     f0, f1 = frames if frames is not None else (scene.frame_start, scene.frame_end)
     if f1 < f0:
         raise FarmExportError(f"the frame range {f0}-{f1} is empty")
-    samples = sample_camera(context, cam, range(f0, f1 + 1))
-    check_static_camera(samples)
-    mode = cam.data.relray.mode
-    motion_doc = motion_table(mode, samples)
+    animated: dict[str, Any] = {}
+    if cam.type == "CAMERA" and cam.data.relray.motion_source == "ANIMATION":
+        w, h = export.render_size(scene.render)
+        motion_doc, animated = animation_motion(context, cam, range(f0, f1 + 1), w, h,
+                                                export.Warnings())
+    else:
+        samples = sample_camera(context, cam, range(f0, f1 + 1))
+        check_static_camera(samples)
+        motion_doc = motion_table(cam.data.relray.mode, samples)
 
     glb = out / "scene.glb"
     with render_modifier_settings(scene):
         depsgraph = context.evaluated_depsgraph_get()
-        exported = export.export_scene(depsgraph, cam)
+        exported = export.export_scene(depsgraph, cam, animated=animated)
         with hidden_unless_rendered(scene, exported.rendered):
             bpy.ops.export_scene.gltf(
                 filepath=str(glb), export_format="GLB", use_renderable=True,
                 export_apply=True, export_lights=False, export_cameras=False,
                 export_animations=False, export_image_format="NONE", export_yup=True,
-                export_extras=False)
+                export_extras=False, export_current_frame=True)
     specs = {m.name: m for m in exported.scene.materials}
     special = {m.name for m in exported.scene.materials if m.emission_blackbody is not None}
     moving = moving_objects(exported)

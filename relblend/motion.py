@@ -206,3 +206,124 @@ def view_doppler_range(camera: CameraSettings, beta: np.ndarray, width: int, hei
     d = np.concatenate(extremes)
     D = np.atleast_1d(relativity.doppler_factor(d, beta))
     return float(D.min()), float(D.max())
+
+
+# ------------------------------------------------------------------ motion from animation
+#
+# The scene clock (Scene › Relativity › Speed of Light): frame f happens at lab time
+# ct_f = c · f / fps (scene units; c in scene units per second, fps = fps / fps_base), so
+# frame 0 is lab time 0. A camera or object whose motion source is "ANIMATION" has its
+# animated world location x(f) as its lab worldline on this clock.
+
+#: Sub-frame half step of the camera's velocity (frames): β_f is the central difference
+#: of the animated location over f ± h, the F-curve's own derivative to O(h²).
+VELOCITY_HALF_STEP = 0.5
+#: A worldline segment pair whose velocities differ by more than this |Δβ| is refined
+#: with sub-frame samples (up to :data:`MAX_REFINE` halvings).
+REFINE_DBETA = 0.02
+MAX_REFINE = 3
+
+
+@dataclass(frozen=True)
+class SceneClock:
+    """ct = c · frame / fps: the lab time of a (sub-)frame, scene units."""
+
+    speed_of_light: float  # scene units per second
+    fps: float  # frames per second
+
+    def __post_init__(self) -> None:
+        for name, v in (("speed of light", self.speed_of_light), ("frame rate", self.fps)):
+            if not (math.isfinite(v) and v > 0.0):
+                raise MotionError(f"the scene's {name} must be a positive number, not {v}")
+
+    @property
+    def ct_per_frame(self) -> float:
+        return self.speed_of_light / self.fps
+
+    def t(self, frame: float) -> float:
+        return frame * self.ct_per_frame
+
+
+def chord_beta(x0: np.ndarray, x1: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    """β of the straight worldline segment from (t0, x0) to (t1, x1): Δx / Δ(ct)."""
+    return (np.asarray(x1, np.float64) - np.asarray(x0, np.float64)) / (t1 - t0)
+
+
+def checked_object_speed(beta: np.ndarray, who: str, frame: float) -> np.ndarray:
+    """β unchanged if finite and |β| < 1, else a MotionError naming ``who`` and the frame."""
+    beta = np.asarray(beta, np.float64)
+    if not np.all(np.isfinite(beta)):
+        raise MotionError(f"{who}: its animated location is not finite at frame {frame:g}")
+    speed = float(np.linalg.norm(beta))
+    if speed >= 1.0:
+        raise MotionError(
+            f"{who}: its animation moves it at {speed:.6g} c at frame {frame:g}, not below "
+            "the speed of light; raise Scene › Relativity › Speed of Light or slow the "
+            "animation down")
+    return beta
+
+
+def animation_event(clock: SceneClock, frame: int, x: np.ndarray, x_before: np.ndarray,
+                    x_after: np.ndarray, tau: float, who: str = "the camera"):
+    """The shutter event of ``frame`` for a camera whose motion is its animation.
+
+    Event (ct_f, x(f)) with ct_f = c f / fps; β_f = (x(f + h) − x(f − h)) / (c · 2h / fps),
+    h = :data:`VELOCITY_HALF_STEP` (``x_before``, ``x_after``); ``tau`` its proper time."""
+    h = VELOCITY_HALF_STEP
+    beta = chord_beta(x_before, x_after, clock.t(frame - h), clock.t(frame + h))
+    beta = checked_object_speed(beta, who, frame)
+    return relativity.ShutterEvent(t=clock.t(frame), x=np.asarray(x, np.float64),
+                                   beta=beta, tau=tau)
+
+
+def proper_time(clock: SceneClock, frames: Sequence[float], positions: np.ndarray,
+                frame_start: float, frame: float) -> float:
+    """The proper time ct' at ``frame`` along the sampled worldline, 0 at ``frame_start``:
+    Σ Δ(ct) / γ over the straight segments between the samples (``frames`` increasing,
+    covering both frames)."""
+    f = np.asarray(frames, np.float64)
+    x = np.asarray(positions, np.float64)
+    t = f * clock.ct_per_frame
+    beta = np.diff(x, axis=0) / np.diff(t)[:, None]
+    dtau = np.diff(t) * np.sqrt(np.maximum(0.0, 1.0 - np.sum(beta * beta, axis=1)))
+    tau = np.concatenate(([0.0], np.cumsum(dtau)))
+    return float(np.interp(frame, f, tau) - np.interp(frame_start, f, tau))
+
+
+def refine_frames(frames: Sequence[float], positions: np.ndarray, clock: SceneClock,
+                  threshold: float = REFINE_DBETA) -> list[float]:
+    """Sub-frames to sample next: the midpoints of both segments around every sample where
+    the chord velocity jumps by more than ``threshold`` (|Δβ|), so light-travel time sees
+    where a fast, turning object was. Empty when the samples already suffice."""
+    f = np.asarray(frames, np.float64)
+    x = np.asarray(positions, np.float64)
+    if len(f) < 3:
+        return []
+    beta = np.diff(x, axis=0) / (np.diff(f) * clock.ct_per_frame)[:, None]
+    jump = np.linalg.norm(np.diff(beta, axis=0), axis=1)
+    new: set[float] = set()
+    for k in np.nonzero(jump > threshold)[0]:
+        new.add(0.5 * (f[k] + f[k + 1]))
+        new.add(0.5 * (f[k + 1] + f[k + 2]))
+    return sorted(new)
+
+
+def object_worldline(clock: SceneClock, frames: Sequence[float], positions: np.ndarray,
+                     who: str, tol: float = 1e-12):
+    """The core's :class:`Worldline` of an object's pivot from its animated location
+    samples (lab time ct = c f / fps), or None when it never moves. Every segment must be
+    slower than light (a MotionError names the object and the frame)."""
+    from ..core.scene.description import Worldline, frozen
+
+    f = np.asarray(frames, np.float64)
+    x = np.asarray(positions, np.float64)
+    if not np.all(np.isfinite(x)):
+        bad = f[np.nonzero(~np.all(np.isfinite(x), axis=1))[0][0]]
+        raise MotionError(f"{who}: its animated location is not finite at frame {bad:g}")
+    scale = max(1.0, float(np.max(np.abs(x))))
+    if len(f) < 2 or float(np.max(np.abs(x - x[0]))) <= tol * scale:
+        return None
+    t = clock.t(f)
+    for k in range(len(f) - 1):
+        checked_object_speed(chord_beta(x[k], x[k + 1], t[k], t[k + 1]), who, f[k])
+    return Worldline(t=frozen(t), pivot=frozen(x))

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import bpy
-from bpy.props import BoolProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 
 if TYPE_CHECKING:
     from .farm import FarmExport
@@ -66,6 +66,23 @@ class RELRAY_OT_add_velocity_keyframe(bpy.types.Operator):  # noqa: N801 - Blend
             if self.linear:
                 set_linear(cam, path)
         self.report({"INFO"}, f"keyed {', '.join(p[7:] for p in paths)} at frame {frame}")
+        return {"FINISHED"}
+
+
+class RELRAY_OT_speed_of_light_preset(bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Set the scene's speed of light (a value in m/s, turned into scene units per second
+    by the scene's unit scale)"""
+
+    bl_idname = "relray.speed_of_light_preset"
+    bl_label = "Speed of Light Preset"
+    bl_options = {"REGISTER", "UNDO"}
+
+    meters_per_second: FloatProperty(name="m/s", min=1e-6, default=299_792_458.0)
+
+    def execute(self, context):
+        scene = context.scene
+        scale = scene.unit_settings.scale_length or 1.0
+        scene.relray.speed_of_light = self.meters_per_second / scale
         return {"FINISHED"}
 
 
@@ -312,6 +329,7 @@ class RELRAY_OT_render_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
 
 classes = (
     RELRAY_OT_add_velocity_keyframe,
+    RELRAY_OT_speed_of_light_preset,
     RELRAY_OT_load_motion_preset,
     RELRAY_MT_motion_presets,
     RELRAY_OT_export_farm,

@@ -76,9 +76,23 @@ def _gamma_get(self) -> float:
     return gamma_or_zero(beta_local(VelocitySettings.from_rna(self)))
 
 
+#: The speed of light in m/s (SI, exact).
+C_SI = 299_792_458.0
+
+MOTION_SOURCES = [
+    ("VELOCITY", "Velocity", "The velocity typed (and keyed) here; the animated location "
+     "only places it"),
+    ("ANIMATION", "Animation", "The animated location is the lab worldline, on the scene "
+     "clock ct = c · frame / fps (Scene › Relativity › Speed of Light)"),
+]
+
+
 class RelrayCameraSettings(bpy.types.PropertyGroup):
     """Relativistic motion of one camera (see the module docstring)."""
 
+    motion_source: EnumProperty(
+        name="Motion", description="Where the camera's motion comes from",
+        items=MOTION_SOURCES, default="VELOCITY")
     velocity_input: EnumProperty(
         name="Velocity",
         description="How the camera's velocity is given",
@@ -180,6 +194,12 @@ class RelraySceneSettings(bpy.types.PropertyGroup):
                               description="The D⁵ radiance transform (beaming)")
     threads: IntProperty(name="Threads", description="Render threads (0: all cores)",
                          min=0, soft_max=256, default=0)
+    speed_of_light: FloatProperty(
+        name="Speed of Light",
+        description="c in scene units per second: with the frame rate it fixes the lab "
+                    "time of every frame, ct = c · frame / fps, for cameras and objects "
+                    "whose motion comes from their animation",
+        unit="VELOCITY", min=1e-6, soft_min=0.01, default=C_SI, precision=3, step=100)
 
 
 def _object_gamma_get(self) -> float:
@@ -191,6 +211,10 @@ def _object_gamma_get(self) -> float:
 class RelrayObjectSettings(bpy.types.PropertyGroup):
     """A mesh object's own motion (see the module docstring)."""
 
+    motion_source: EnumProperty(
+        name="Motion", description="Where the object's motion comes from (Animation: "
+        "when the camera's motion comes from its animation too, on the scene clock)",
+        items=MOTION_SOURCES, default="ANIMATION")
     velocity: FloatVectorProperty(
         name="Velocity",
         description="The object's own velocity v/c in world axes; |v| must stay below 1 "

@@ -103,6 +103,10 @@ class RELRAY_PT_camera_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 -
         row.operator("relray.add_velocity_keyframe", icon="KEY_HLT", text="Key Velocity")
         layout.use_property_split = True
         layout.use_property_decorate = True
+        layout.prop(s, "motion_source", expand=True)
+        if s.motion_source == "ANIMATION":
+            draw_animation_source(layout, context)
+            return
         layout.prop(s, "mode", expand=True)
         layout.prop(s, "velocity_input", expand=True)
         if s.velocity_input == "VECTOR":
@@ -128,6 +132,55 @@ class RELRAY_PT_camera_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 -
         layout.label(text=view_readout(context, cam), icon="INFO")
 
 
+def clock_readout(scene) -> str:
+    """'c = 10 m/s: ct 0.4167 per frame at 24 fps' (scene units, the scene clock)."""
+    rs = scene.relray
+    fps = scene.render.fps / scene.render.fps_base
+    per_frame = rs.speed_of_light / fps if fps > 0 else float("nan")
+    return f"lab time per frame ct = c / fps = {per_frame:.4g} (at {fps:.4g} fps)"
+
+
+def draw_animation_source(layout, context) -> None:
+    """The camera's Relativity panel when its motion is its animation."""
+    scene = context.scene
+    layout.prop(scene.relray, "speed_of_light")
+    layout.label(text=clock_readout(scene), icon="TIME")
+    layout.label(text="β at each frame: the animated location's velocity / c", icon="INFO")
+    rs = scene.relray
+    col = layout.column(heading="Light")
+    col.prop(rs, "doppler")
+    col.prop(rs, "searchlight")
+    layout.prop(rs, "spectral")
+
+
+class RELRAY_PT_scene_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    """Scene › Relativity: the speed of light and the scene clock."""
+
+    bl_label = "Relativity"
+    bl_context = "scene"
+
+    def draw(self, context):
+        layout = self.layout
+        scene = context.scene
+        row = layout.row(align=True)
+        for label, value in SPEED_OF_LIGHT_PRESETS:
+            op = row.operator("relray.speed_of_light_preset", text=label)
+            op.meters_per_second = value
+        layout.use_property_split = True
+        layout.prop(scene.relray, "speed_of_light")
+        layout.label(text=clock_readout(scene), icon="TIME")
+        cam = scene.camera
+        if cam is not None and cam.type == "CAMERA" \
+                and cam.data.relray.motion_source != "ANIMATION":
+            layout.label(text="The camera's motion is typed (Velocity): the clock is used "
+                              "when it follows its animation", icon="INFO")
+
+
+#: (label, m/s) of the speed-of-light preset buttons.
+SPEED_OF_LIGHT_PRESETS = (("Real", 299_792_458.0), ("100 m/s", 100.0), ("10 m/s", 10.0),
+                          ("1 m/s", 1.0))
+
+
 class RELRAY_PT_object_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Relativity"
     bl_context = "object"
@@ -141,6 +194,15 @@ class RELRAY_PT_object_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 -
         layout = self.layout
         s = context.object.relray
         layout.use_property_split = True
+        layout.prop(s, "motion_source", expand=True)
+        cam = context.scene.camera
+        clock = cam is not None and cam.type == "CAMERA" \
+            and cam.data.relray.motion_source == "ANIMATION"
+        if s.motion_source == "ANIMATION":
+            layout.label(text="Moves along its animated location (worldline)" if clock else
+                         "Follows its animation only when the camera's motion does too",
+                         icon="INFO")
+            return
         layout.prop(s, "velocity")
         col = layout.column()
         col.enabled = False
@@ -261,6 +323,7 @@ class RELRAY_PT_light(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender nam
 
 
 classes = (
+    RELRAY_PT_scene_relativity,
     RELRAY_PT_camera_relativity,
     RELRAY_PT_object_relativity,
     RELRAY_PT_relativity_summary,
