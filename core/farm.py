@@ -89,6 +89,7 @@ from . import user_cache_dir
 from .errors import UserError
 from .output.digest import frame_digest, job_digest
 from .output.frame_files import (
+    FramePlan,
     check_frame_names,
     frame_is_done,
     frame_stem,
@@ -102,7 +103,7 @@ from .progress import Reporter
 from .render.film import Film
 from .render.frames import FrameRenderer, build_renderer
 from .resources import usable_cores
-from .scene.description import Job
+from .scene.description import AUTO_EXPOSURE, Job
 from .scene.geometry import build_scene
 from .scene.motion import resolve_camera
 
@@ -283,10 +284,10 @@ def render_frame_task(job: Job, run_id: str, frame: int, event: ShutterEvent, th
     renderer = worker_renderer(job, run_id, task_threads(threads, slots))
     film, stats = renderer.render(event, frame)
     d_range = (stats.d_min, stats.d_max)
-    paths = write_film(job, frame, event, film, renderer.to_rgb, stats.seconds, d_range,
-                       digest)
+    paths, exposure = write_film(job, frame, event, film, renderer.to_rgb, stats.seconds,
+                                 d_range, digest)
     return {"frame": frame, "paths": [str(p) for p in paths], "seconds": stats.seconds,
-            "d_range": d_range, "skipped": False}
+            "d_range": d_range, "skipped": False, "exposure": exposure}
 
 
 @_user_errors_returned
@@ -454,11 +455,27 @@ def _message(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
+def check_auto_exposure(job: Job, plan: FramePlan) -> None:
+    """``output.exposure = "auto"`` with more than one frame to render is a user error on
+    Dask: its moving average needs the frames written in order (:mod:`.output.exposure`)."""
+    if job.output.exposure == AUTO_EXPOSURE and len(plan.todo) > 1:
+        raise UserError(
+            f"\"{AUTO_EXPOSURE}\" smooths the exposure over the frames in order, which a "
+            f"farm renders side by side ({len(plan.todo)} frames to render): render them "
+            "without --workers/--scheduler, or give a number of stops",
+            key="output.exposure", file=job.path)
+
+
 def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
                    reporter: Reporter | None = None, threads: int = 0,
                    batches: int = STILL_BATCHES, scheduler: str | None = None,
                    workers: int | None = None) -> FarmResult:
     """Render the job's frames that are not done on the cluster of ``client``.
+
+    ``output.exposure = "auto"`` needs the frames written in order (its moving average,
+    :mod:`.output.exposure`): with more than one frame to render it is a user error; a
+    single frame (a still, or the last one left) reads the range's earlier frames'
+    readings from their files as a local run does.
 
     ``threads`` is each task's render threads (0: the worker decides, see
     :func:`task_threads`). Frames fail alone: see :class:`FarmResult`.
@@ -466,6 +483,7 @@ def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
     reporter = reporter if reporter is not None else Reporter()
     resolve_camera(job, build_scene(job))  # user errors here, before any task
     plan = plan_frames(job, overwrite)
+    check_auto_exposure(job, plan)
     threads = threads or job.render.threads
     run_id = uuid.uuid4().hex
     result = FarmResult(skipped=plan.done)
@@ -519,7 +537,8 @@ def _render_frames(job: Job, client: Any, todo: list[tuple[int, ShutterEvent]], 
             result.written += [Path(p) for p in out["paths"]]
             result.rendered.append(frame)
             reporter.advance(1)
-            reporter.frame_done(frame, out["paths"], out["seconds"], out["d_range"])
+            reporter.frame_done(frame, out["paths"], out["seconds"], out["d_range"],
+                                out.get("exposure"))
     except BaseException:
         with contextlib.suppress(Exception):
             within(5.0, lambda: client.cancel(list(pending.futures)))
@@ -580,11 +599,11 @@ def _render_still(job: Job, client: Any, todo: tuple[int, ShutterEvent],
             within(5.0, lambda: client.cancel(list(pending.futures)))
         raise
     seconds = time.perf_counter() - t0
-    paths = write_film(job, frame, ev, merged, sensor_to_rgb(job.render.spectral), seconds,
-                       (d_min, d_max), digest)
+    paths, exposure = write_film(job, frame, ev, merged, sensor_to_rgb(job.render.spectral),
+                                 seconds, (d_min, d_max), digest)
     result.written += paths
     result.rendered.append(frame)
-    reporter.frame_done(frame, paths, seconds, (d_min, d_max))
+    reporter.frame_done(frame, paths, seconds, (d_min, d_max), exposure)
 
 
 def render(job: Job, *, scheduler: str | None = None, workers: int = 0,
@@ -599,6 +618,7 @@ def render(job: Job, *, scheduler: str | None = None, workers: int = 0,
     reporter = reporter if reporter is not None else Reporter()
     t0 = time.perf_counter()
     check_frame_names(job)  # a bad name is one line before any cluster starts
+    check_auto_exposure(job, plan_frames(job, overwrite))
     with dask_client(scheduler, workers, connect_timeout, job.path) as client:
         n_workers = len(client.scheduler_info().get("workers", {})) if scheduler else workers
         result = render_on_dask(job, client, overwrite=overwrite, reporter=reporter,
@@ -617,7 +637,8 @@ def with_render_threads(job: Job, threads: int) -> Job:
 
 __all__ = [
     "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "SchedulerLostError",
-    "TaskUserError", "close_quietly", "dask_client", "host_slots", "quiet_dask_logging",
+    "TaskUserError", "check_auto_exposure", "close_quietly", "dask_client", "host_slots",
+    "quiet_dask_logging",
     "render", "render_batch_task", "render_command", "render_frame_task", "render_on_dask",
     "sample_batches", "scheduler_address", "subprocess_env", "task_threads", "within",
     "with_render_threads", "worker_renderer",

@@ -14,7 +14,9 @@ start         version, job, out, mode ("local" | "dask"), scheduler, workers,
               "job", "renderer", "no digest"), todo [frames], unit, units
 progress      fraction (0..1), frames_done, frames_total, elapsed, eta_seconds (or null)
 frame_done    frame, path (the EXR, else the first file), paths, seconds, fraction,
-              frames_done, frames_total
+              frames_done, frames_total, exposure (stops applied to the PNG, or null
+              when not known: a farm frame), exposure_metered (output.exposure = "auto":
+              the frame's meter reading in stops, null for a black frame; else absent)
 error         frame (null when not about one frame), message, kind ("frame" | "user")
 finish        status ("ok" | "failed" | "cancelled" | "error"), exit_code, rendered,
               failed [frames], seconds
@@ -40,6 +42,7 @@ from typing import Any, TextIO
 from tqdm import tqdm
 
 from .. import __version__
+from .output.exposure import FrameExposure
 from .output.frame_files import STALE_REASONS, FramePlan
 from .scene.description import Job
 
@@ -63,6 +66,8 @@ class Reporter:
         self.frames_total = 0
         self.frames_done = 0
         self.rendered: list[int] = []
+        self.exposures: dict[int, FrameExposure] = {}
+        """Each finished frame's exposure, where the run knows it."""
         self.failed: list[int] = []
         self.finished = False
 
@@ -79,10 +84,13 @@ class Reporter:
             self._advanced(int(n))
 
     def frame_done(self, frame: int, paths: Sequence[Path | str], seconds: float,
-                   d_range: tuple[float, float] | None = None) -> None:
+                   d_range: tuple[float, float] | None = None,
+                   exposure: FrameExposure | None = None) -> None:
         with self.lock:
             self.frames_done += 1
             self.rendered.append(frame)
+            if exposure is not None:
+                self.exposures[frame] = exposure
             self._frame_done(frame, [str(p) for p in paths], seconds, d_range)
 
     def error(self, frame: int | None, message: str, kind: str = "frame") -> None:
@@ -161,7 +169,9 @@ class TqdmReporter(Reporter):
     def _frame_done(self, frame, paths, seconds, d_range) -> None:
         if self.bar is not None:
             d = f" D {d_range[0]:.3g}..{d_range[1]:.3g}" if d_range else ""
-            self.bar.set_postfix_str(f"frame {frame}{d}")
+            ev = self.exposures.get(frame)
+            e = f" {ev.text()}" if ev is not None else ""
+            self.bar.set_postfix_str(f"frame {frame}{d}{e}")
 
     def _error(self, frame, message, kind) -> None:
         what = f"frame {frame} failed: " if frame is not None else ""
@@ -216,9 +226,13 @@ class JsonReporter(Reporter):
     def _frame_done(self, frame, paths, seconds, d_range) -> None:
         main = next((p for p in paths if p.endswith(".exr") and not p.endswith(".spectral.exr")),
                     paths[0] if paths else None)
+        ev = self.exposures.get(frame)
+        exposure: dict[str, float | None] = {"exposure": None if ev is None else ev.stops}
+        if ev is not None and ev.auto:
+            exposure["exposure_metered"] = ev.metered
         self.emit("frame_done", frame=frame, path=main, paths=paths, seconds=round(seconds, 4),
                   fraction=round(self.fraction, 6), frames_done=self.frames_done,
-                  frames_total=self.frames_total)
+                  frames_total=self.frames_total, **exposure)
         if self.unit != "batch":
             self._progress()
 

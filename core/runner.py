@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from .output.frame_files import plan_frames, write_film
+from .output.frame_files import exposure_chain, plan_frames, write_film
 from .progress import default_reporter
 from .render.frames import build_renderer
 from .scene.description import Job
@@ -27,6 +27,10 @@ def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,
     paths, each finished frame and the end; by default a tqdm bar (nothing without
     ``show_progress``). ``cancel`` is polled between wavefronts; when it says True the
     frame in flight stops with :class:`RenderCancelled` (finished frames stay).
+
+    Frames are written in frame order, so ``output.exposure = "auto"`` smooths its
+    exposure over them (:func:`.output.frame_files.exposure_chain`; the frames done in an
+    earlier run give their recorded meter readings, so resuming changes nothing).
     """
     reporter = reporter if reporter is not None else default_reporter(show_progress)
     t0 = time.perf_counter()
@@ -39,11 +43,13 @@ def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,
     written: list = []
     if plan.todo:
         renderer = build_renderer(job, scene)
+        chain = exposure_chain(job, plan.frames)
         for frame, ev in plan.todo:
             film, stats = renderer.render(ev, frame, progress=reporter.advance, cancel=cancel)
-            paths = write_film(job, frame, ev, film, renderer.to_rgb, stats.seconds,
-                               (stats.d_min, stats.d_max), plan.digests[frame])
+            paths, exposure = write_film(job, frame, ev, film, renderer.to_rgb, stats.seconds,
+                                         (stats.d_min, stats.d_max), plan.digests[frame], chain)
             written += paths
-            reporter.frame_done(frame, paths, stats.seconds, (stats.d_min, stats.d_max))
+            reporter.frame_done(frame, paths, stats.seconds, (stats.d_min, stats.d_max),
+                                exposure)
     reporter.finish("ok", time.perf_counter() - t0)
     return written

@@ -153,6 +153,16 @@ BAD_JOBS = [
     ("max_depth zero", "[render]\nmax_depth = 0\n" + SCENE, "render.max_depth", ">= 1"),
     ("nan", "[render]\nnoise_threshold = nan\n" + SCENE, "render.noise_threshold", "finite"),
     ("inf", "[output]\nexposure = inf\n" + SCENE, "output.exposure", "finite"),
+    ("exposure nan", "[output]\nexposure = nan\n" + SCENE, "output.exposure", "finite"),
+    ("exposure word", '[output]\nexposure = "autox"\n' + SCENE, "output.exposure",
+     "did you mean 'auto'"),
+    ("exposure case", '[output]\nexposure = "Auto"\n' + SCENE, "output.exposure",
+     'nor "auto"'),
+    ("exposure bool", "[output]\nexposure = true\n" + SCENE, "output.exposure",
+     'a number of stops or "auto", not a boolean'),
+    ("exposure array", '[output]\nexposure = ["auto"]\n' + SCENE, "output.exposure",
+     "not an array"),
+    ("exposure range", "[output]\nexposure = 65\n" + SCENE, "output.exposure", "<= 64"),
     ("negative threshold", "[render]\nnoise_threshold = -1\n" + SCENE, "render.noise_threshold",
      ">= 0"),
     ("spectral mode", '[render]\nspectral = "cie1964"\n' + SCENE, "render.spectral", "cie1931"),
@@ -329,6 +339,15 @@ def test_malformed_job(tmp_path: Path, text: str, key: str, word: str) -> None:
     message = str(e)
     assert f"key '{key}'" in message and str(path.resolve()) in message
     assert word in message, message
+
+
+@pytest.mark.parametrize(("text", "want"), [('"auto"', "auto"), ("2", 2.0), ("-1.5", -1.5),
+                                            ("64", 64.0), ("-64.0", -64.0)])
+def test_exposure_is_a_number_of_stops_or_auto(tmp_path: Path, text: str, want) -> None:
+    j = load(tmp_path, f"[output]\nexposure = {text}\n" + SCENE)
+    assert j.output.exposure == want and type(j.output.exposure) is type(want)
+    shown = f"{want:g}" if isinstance(want, float) else want
+    assert f", exposure {shown}\n" in job.job_summary(j)
 
 
 def test_toml_syntax_error_names_the_line(tmp_path: Path) -> None:

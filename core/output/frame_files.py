@@ -1,6 +1,7 @@
 """A frame's files: their names (checked for every frame before anything renders), the
 metadata they record, whether a frame is already done (resume: the recorded
-:mod:`.digest` equals the job's), and writing a finished film.
+:mod:`.digest` equals the job's), and writing a finished film with its exposure
+(``output.exposure``: a number, or "auto" through an :func:`exposure_chain`).
 """
 
 from __future__ import annotations
@@ -19,10 +20,11 @@ from ..errors import UserError
 from ..files import is_regular_file
 from ..physics import relativity
 from ..render.film import Film
-from ..scene.description import Job
+from ..scene.description import AUTO_EXPOSURE, Job
 from ..scene.motion import frame_events
 from ..scene.names import NAME_MAX_BYTES, format_frame_name
 from .digest import METADATA_KEY, frame_digest, job_digest, renderer_identity
+from .exposure import METERED_KEY, ExposureChain, FrameExposure, parse_metered
 from .imageio import (
     frame_complete,
     frame_paths,
@@ -288,24 +290,64 @@ def plan_frames(job: Job, overwrite: bool = False) -> FramePlan:
                      dict(sorted(reasons.items())), digests)
 
 
+def exposure_chain(job: Job, frames: list[int] | None = None) -> ExposureChain | None:
+    """The auto-exposure moving average of a run over ``frames`` (by default the run's
+    range: ``--frames``, else ``motion.frames``), or None when ``output.exposure`` is a
+    number. A frame of the range that this process does not meter (done in an earlier
+    run) gives the reading recorded in its files (``relray:exposure_metered``), so a
+    resumed run applies the same exposure as an uninterrupted one (:mod:`.exposure`)."""
+    if job.output.exposure != AUTO_EXPOSURE:
+        return None
+    if frames is None:
+        first, last = job.motion.render_frames or job.motion.frames
+        frames = list(range(first, last + 1))
+
+    def recorded(frame: int) -> float | None:
+        try:
+            path = _record_path(job, frame)
+        except (KeyError, IndexError, ValueError, AttributeError, TypeError, OverflowError):
+            return None
+        return parse_metered(read_metadata(path).get(METERED_KEY))
+
+    return ExposureChain(frames, recorded)
+
+
 def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
                to_rgb: np.ndarray, seconds: float, d_range: tuple[float, float],
-               digest: str | None = None) -> list:
-    """Resolve ``film`` and write the frame's files atomically (EXR last); return the paths.
+               digest: str | None = None, chain: ExposureChain | None = None
+               ) -> tuple[list, FrameExposure]:
+    """Resolve ``film`` and write the frame's files atomically (EXR last); return the paths
+    and the frame's exposure.
+
     They record ``digest``: the plan's (:attr:`FramePlan.digests`), computed before the
     scene was loaded; by default :func:`.digest.frame_digest` now, which is right only if
-    no input file can have changed since the scene was loaded."""
+    no input file can have changed since the scene was loaded.
+
+    Exposure: a number is applied to the PNG as given; "auto" meters the image and takes
+    the stops from ``chain`` (the run's :func:`exposure_chain`, frames written in order;
+    by default one made now, which reads the range's earlier frames from their files).
+    The files record ``relray:exposure`` (stops applied to the PNG) and, auto,
+    ``relray:exposure_metered``; the EXR pixels are never exposed.
+    """
     if film.nonfinite_samples:
         logging.getLogger("relray").warning("frame %d: %d non-finite samples dropped", frame,
                                             film.nonfinite_samples)
     image = film.resolve(to_rgb)
+    if job.output.exposure == AUTO_EXPOSURE:
+        chain = chain if chain is not None else exposure_chain(job)
+        assert chain is not None
+        exposure = chain.record(frame, image.rgba)
+    else:
+        exposure = FrameExposure(float(job.output.exposure))
     meta = frame_metadata(job, frame, event, digest)
     meta["relray:seconds"] = f"{seconds:.3f}"
     meta["relray:doppler_range"] = f"{d_range[0]:.6g},{d_range[1]:.6g}"
+    meta.update(exposure.metadata())
     try:
-        return write_frame(job.output.dir, frame_stem(job, frame), job.output.formats,
-                           image, meta, job.output.exposure)
+        paths = write_frame(job.output.dir, frame_stem(job, frame), job.output.formats,
+                            image, meta, exposure.stops)
     except UserError as e:  # name the job file, and the file written as part of the message
         if e.file is None or e.file == str(job.path):
             raise
         raise UserError(f"{e.file}: {e.detail}", key=e.key, file=job.path) from None
+    return paths, exposure

@@ -18,7 +18,9 @@ Files of one frame (job-format.md, "Output contract"), row 0 = the top of the pi
     Metadata: see :func:`metadata_for` (``relray:*`` strings and ``Software``).
 
 ``dir/stem.png``  (``"png"``)
-    8-bit sRGB of ``rgb · 2**exposure``. The sRGB OETF (IEC 61966-2-1):
+    8-bit sRGB of ``rgb · 2**exposure`` (``output.exposure``'s stops, or those
+    :mod:`.exposure` chose for the frame with ``"auto"``; the EXRs are never exposed).
+    The sRGB OETF (IEC 61966-2-1):
 
         V = 12.92 L                     for L <= 0.0031308
         V = 1.055 L^(1/2.4) - 0.055     otherwise,

@@ -31,9 +31,15 @@ LIGHT_TYPES = ("point", "spot", "sun", "area")
 #: size (an area, emission × strength, colour × power) stays below 1e30, and an event
 #: γ·ct below 1e30 even at γ = 1.3e8.
 MAX_ABS_NUMBER = 1e15
+#: ``output.exposure``: a number of stops, or this word (metered per frame, smoothed over
+#: the animation: :mod:`..output.exposure`).
+AUTO_EXPOSURE = "auto"
+#: Exposures (given, or metered) lie within ±this many stops.
+MAX_EXPOSURE_STOPS = 64.0
 
 __all__ = ["SPECTRAL_MODES", "OUTPUT_FORMATS", "AOV_NAMES", "MOTION_MODES", "SHAPES",
-           "LIGHT_TYPES", "MAX_ABS_NUMBER", "frozen", "RenderSettings", "OutputSettings",
+           "LIGHT_TYPES", "MAX_ABS_NUMBER", "AUTO_EXPOSURE", "MAX_EXPOSURE_STOPS", "frozen",
+           "RenderSettings", "OutputSettings",
            "CameraSettings", "MotionSettings", "MaterialSpec", "ObjectSpec", "LightSpec",
            "SceneSpec", "Job"]
 
@@ -64,14 +70,15 @@ class RenderSettings:
 
 @dataclass(frozen=True)
 class OutputSettings:
-    """The ``[output]`` table. ``dir`` is absolute."""
+    """The ``[output]`` table. ``dir`` is absolute. ``exposure``: stops applied to the PNG,
+    or :data:`AUTO_EXPOSURE` (metered per frame: :mod:`..output.exposure`)."""
 
     dir: Path
     name: str = "frame_{frame:04d}"
     formats: tuple[str, ...] = ("exr", "png")
     spectral_bands: tuple[float, float, float] = (380.0, 780.0, 10.0)
     aovs: tuple[str, ...] = ("depth", "doppler", "lab_time")
-    exposure: float = 0.0
+    exposure: float | str = 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -796,7 +796,8 @@ def job_summary(job: Job) -> str:
         f"spectral    {r.spectral}, doppler {'on' if r.doppler else 'off'}, "
         f"searchlight {'on' if r.searchlight else 'off'}"
     )
-    lines.append(f"output      {o.dir / o.name}.{{{','.join(o.formats)}}}, exposure {o.exposure:g}")
+    exposure = o.exposure if isinstance(o.exposure, str) else f"{o.exposure:g}"
+    lines.append(f"output      {o.dir / o.name}.{{{','.join(o.formats)}}}, exposure {exposure}")
     if o.aovs:
         lines.append(f"aovs        {', '.join(o.aovs)}")
     if "spectral-exr" in o.formats:

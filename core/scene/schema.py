@@ -69,8 +69,10 @@ from ..errors import UserError
 from . import shapes
 from .description import (
     AOV_NAMES,
+    AUTO_EXPOSURE,
     LIGHT_TYPES,
     MAX_ABS_NUMBER,
+    MAX_EXPOSURE_STOPS,
     MOTION_MODES,
     OUTPUT_FORMATS,
     SHAPES,
@@ -294,6 +296,21 @@ def _quad_rule(v: list[list[float]]) -> list[list[float]]:
     return v
 
 
+def _exposure_rule(value: Any) -> Any:
+    """``output.exposure``: a string must be "auto"; anything else but a number is
+    refused here, with one message; a number goes on to the number's own checks."""
+    if isinstance(value, str):
+        if value == AUTO_EXPOSURE:
+            return value
+        hint = _did_you_mean(value, [AUTO_EXPOSURE], 0.5)
+        raise _fail(f"{json.dumps(value)} is neither a number of stops nor "
+                    f"\"{AUTO_EXPOSURE}\"{hint}")
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise _fail(f"must be a number of stops or \"{AUTO_EXPOSURE}\", not "
+                    f"{_type_name(value)}")
+    return value
+
+
 def _str_to_list(value: Any) -> Any:
     return [value] if isinstance(value, str) else value
 
@@ -363,8 +380,14 @@ class Output(Table):
                                           "inside 360..830, step ≥ 0.1, whole steps.")
     aovs: Annotated[list[_choice(AOV_NAMES)], Expect("an array of strings")] = Field(
         list(AOV_NAMES), description="Extra EXR layers (Depth.Z, Doppler.D, LabTime.T).")
-    exposure: Annotated[Number, Field(ge=-64.0, le=64.0)] = Field(
-        0.0, description="Stops, applied to PNG only.")
+    exposure: Annotated[
+        Annotated[Number, Field(ge=-MAX_EXPOSURE_STOPS, le=MAX_EXPOSURE_STOPS)]
+        | Literal[AUTO_EXPOSURE],  # type: ignore[valid-type]
+        BeforeValidator(_exposure_rule),
+        Expect(f'a number of stops or "{AUTO_EXPOSURE}"')] = Field(
+        0.0, description="Stops, applied to PNG only (the EXR stays linear); \"auto\": "
+                         "metered per frame (log-average luminance onto 0.18) and smoothed "
+                         "over the animation.")
 
 
 class Camera(Table):
@@ -1101,6 +1124,11 @@ def _type_text(tp: Any, meta: list[Any]) -> tuple[str, str]:
             rng = _bounds(_unwrap(get_args(item)[0])[1])
         text = expect.removeprefix("an ").removeprefix("a ") if expect else "array"
         return text, f"each {rng}" if rng else ""
+    members = [m for m in _union_members(tp) if m is not type(None)]
+    if members:  # a number or a word ("auto")
+        parts = [_type_text(m, meta if i == 0 else []) for i, m in enumerate(members)]
+        return (" or ".join(dict.fromkeys(t for t, _ in parts)),
+                " \\| ".join(r for _, r in parts if r))
     names = {int: "integer", float: "number", bool: "boolean", str: "string"}
     return names.get(tp, str(tp)), _bounds(meta)
 
