@@ -50,6 +50,8 @@ SCRIPT_CANCEL = None
 # plus the worldline clock's inputs; cleared when a render job starts or ends.
 _HISTORY: dict[tuple[str, str], dict[int, np.ndarray]] = {}
 _CLOCK: dict[tuple[str, str], tuple[float, float]] = {}
+# The stops applied to the last frame of this render job, per scene (auto exposure).
+_EXPOSURE: dict[str, float] = {}
 # World matrices sampled for motion from the animation, per render job and scene.
 _SAMPLES: dict[str, object] = {}
 # The last prepared scene: (content hash, PreparedScene).
@@ -69,6 +71,7 @@ def clear_caches(*_args) -> None:
     _HISTORY.clear()
     _CLOCK.clear()
     _SAMPLES.clear()
+    _EXPOSURE.clear()
 
 
 def free_prepared() -> None:
@@ -254,14 +257,17 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
             self.update_stats("", f"{head} | cancelled")
             return
         image = film.resolve(renderer.to_rgb)
-        self._write_result(image, passes, scene.render.film_transparent, w, h)
-        _keep_result(setup, image, stats, t_prep)
+        exposure = auto_exposure(scene, image.rgba) if rs.auto_exposure else None
+        self._write_result(image, passes, scene.render.film_transparent, w, h, exposure)
+        _keep_result(setup, image, stats, t_prep, exposure)
         print(f"relray: frame {setup.frame}: {w}x{h}, {rs.samples} spp, γ {setup.gamma:.6g}, "
               f"D {stats.d_min:.4g}..{stats.d_max:.4g}, β {np.round(setup.event.beta, 6)}, "
               f"ct' {setup.event.tau:.6g}, export {ex.seconds * 1000:.1f} ms, render "
               f"{stats.seconds:.2f} s", flush=True)
+        ev = "" if exposure is None else f" | {exposure.text()}"
         self.update_stats("", f"Frame {setup.frame} | {rs.samples} spp | γ {setup.gamma:.4f} | "
-                              f"D {stats.d_min:.3f}–{stats.d_max:.3f} | {stats.seconds:.2f} s")
+                              f"D {stats.d_min:.3f}–{stats.d_max:.3f}{ev} | "
+                              f"{stats.seconds:.2f} s")
 
     def _run_cancellable(self, renderer, setup: FrameSetup, total: int, head: str):
         """Render in a worker thread; poll test_break and show progress from this one."""
@@ -308,9 +314,14 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
             return None, None
         return out["result"]
 
-    def _write_result(self, image, passes: list[str], transparent: bool, w: int, h: int):
-        """Fill the render result; rows flipped (Blender's row 0 is the bottom)."""
+    def _write_result(self, image, passes: list[str], transparent: bool, w: int, h: int,
+                      exposure=None):
+        """Fill the render result; rows flipped (Blender's row 0 is the bottom). With an
+        auto ``exposure`` (``core.output.exposure.FrameExposure``) Combined is scaled by
+        2^stops and the stops go into the result's metadata."""
         rgba = np.array(image.rgba[::-1], np.float32)
+        if exposure is not None:
+            rgba[..., :3] *= np.float32(2.0 ** exposure.stops)
         if transparent:
             rgba[rgba[..., 3] <= 0.0, :3] = 0.0
         else:
@@ -324,9 +335,14 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
                 plane = np.array(image.aovs[aov][::-1], np.float32).reshape(-1, 1)
                 layer.passes[name].rect = plane
         self.end_result(result)
+        if exposure is not None:  # on the final result: a partial one's stamps are lost
+            final = self.get_result()
+            for key, value in exposure.metadata().items():
+                final.stamp_data_add_field(key, value)
 
 
-def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float) -> None:
+def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float,
+                 exposure=None) -> None:
     RESULTS.pop(setup.frame, None)  # re-inserted last
     RESULTS[setup.frame] = {
         "frame": setup.frame, "rgba": image.rgba, "aovs": image.aovs, "event": setup.event,
@@ -334,6 +350,7 @@ def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float) -> Non
         "export_seconds": setup.exported.seconds, "prepare_seconds": prepare_seconds,
         "render_seconds": stats.seconds, "warnings": list(setup.exported.warnings.messages),
         "triangles": len(setup.exported.scene.triangles),
+        "exposure": exposure,
     }
     while len(RESULTS) > RESULTS_KEPT:
         RESULTS.pop(next(iter(RESULTS)))
@@ -341,6 +358,16 @@ def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float) -> Non
 
 #: Seconds from a test_break request to the core stopping, in the last cancelled render.
 LAST_CANCEL_LATENCY: float | None = None
+
+
+def auto_exposure(scene, rgba: np.ndarray):
+    """Meter this frame and smooth over the frames of the render job before it, in order
+    (``core.output.exposure.frame_exposure``; a still is metered alone)."""
+    from ..core.output import exposure
+
+    fe = exposure.frame_exposure(rgba, _EXPOSURE.get(scene.name))
+    _EXPOSURE[scene.name] = fe.stops
+    return fe
 
 
 def scene_clock(scene):

@@ -194,6 +194,12 @@ class RelraySceneSettings(bpy.types.PropertyGroup):
                               description="The D⁵ radiance transform (beaming)")
     threads: IntProperty(name="Threads", description="Render threads (0: all cores)",
                          min=0, soft_max=256, default=0)
+    auto_exposure: BoolProperty(
+        name="Auto Exposure", default=False,
+        description="Meter every frame (log-average luminance onto middle grey 0.18) and "
+                    "scale the image by the smoothed exposure, so the searchlight effect's "
+                    "orders of magnitude stay visible over a fly-by; the stops applied are "
+                    "in the stats line and the file's metadata (relray:exposure)")
     speed_of_light: FloatProperty(
         name="Speed of Light",
         description="c in scene units per second: with the frame rate it fixes the lab "

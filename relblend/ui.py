@@ -276,6 +276,7 @@ class RELRAY_PT_film(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender nami
         layout = self.layout
         layout.use_property_split = True
         layout.prop(context.scene.render, "film_transparent")
+        layout.prop(context.scene.relray, "auto_exposure")
 
 
 class RELRAY_PT_passes(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
