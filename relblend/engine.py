@@ -74,6 +74,42 @@ def clear_caches(*_args) -> None:
     _EXPOSURE.clear()
 
 
+@bpy.app.handlers.persistent
+def passes_into_file(scene, *_args) -> None:
+    """After Blender writes a frame (``render_write``): when the output is a multilayer
+    EXR without this engine's passes (Blender 5.0 writes only Combined there, for every
+    engine), add Depth, Doppler and LabTime as ``<view layer>.<Pass>.<channel>``."""
+    if scene.render.engine != RelrayRenderEngine.bl_idname:
+        return
+    settings = scene.render.image_settings
+    if settings.file_format != "OPEN_EXR_MULTILAYER":
+        return
+    kept = RESULTS.get(scene.frame_current)
+    if not kept or not kept.get("planes"):
+        return
+    path = written_file(scene, kept["started"])
+    if path is None:
+        print("relray: warning: the written EXR was not found; its passes are not added",
+              flush=True)
+        return
+    from ..core.output.imageio import add_exr_channels
+
+    add_exr_channels(path, kept["planes"])
+
+
+def written_file(scene, since: float):
+    """The file Blender has just written for the current frame (animation frames carry the
+    frame number, stills not), modified after ``since`` (a time.time())."""
+    from pathlib import Path
+
+    frame_path = Path(scene.render.frame_path(frame=scene.frame_current))
+    still = Path(bpy.path.abspath(scene.render.filepath))
+    if scene.render.use_file_extension and still.suffix.lower() != ".exr":
+        still = still.with_name(still.name + ".exr")
+    found = [p for p in (frame_path, still) if p.is_file() and p.stat().st_mtime >= since - 1]
+    return max(found, key=lambda p: p.stat().st_mtime) if found else None
+
+
 def free_prepared() -> None:
     _PREPARED.clear()
 
@@ -240,6 +276,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         layer = depsgraph.view_layer
         passes = enabled_passes(layer)
         aovs = tuple(PASSES[p][3] for p in passes if PASSES[p][3] is not None)
+        _STARTED[0] = time.time()
         self.update_stats("", f"Frame {setup.frame} | preparing")
         t_prep = time.perf_counter()
         prep = prepared_scene(ex.scene, rs.spectral)
@@ -259,7 +296,8 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         image = film.resolve(renderer.to_rgb)
         exposure = auto_exposure(scene, image.rgba) if rs.auto_exposure else None
         self._write_result(image, passes, scene.render.film_transparent, w, h, exposure)
-        _keep_result(setup, image, stats, t_prep, exposure)
+        _keep_result(setup, image, stats, t_prep, exposure,
+                     file_planes(image, passes, layer.name))
         print(f"relray: frame {setup.frame}: {w}x{h}, {rs.samples} spp, γ {setup.gamma:.6g}, "
               f"D {stats.d_min:.4g}..{stats.d_max:.4g}, β {np.round(setup.event.beta, 6)}, "
               f"ct' {setup.event.tau:.6g}, export {ex.seconds * 1000:.1f} ms, render "
@@ -341,8 +379,18 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
                 final.stamp_data_add_field(key, value)
 
 
+def file_planes(image, passes: list[str], layer: str) -> dict[str, np.ndarray]:
+    """The extra passes as multilayer EXR channels: ``<layer>.<Pass>.<channel>``."""
+    out = {}
+    for name in passes:
+        _, chan, _, aov = PASSES[name]
+        if aov is not None:
+            out[f"{layer}.{name}.{chan}"] = image.aovs[aov]
+    return out
+
+
 def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float,
-                 exposure=None) -> None:
+                 exposure=None, planes: dict | None = None) -> None:
     RESULTS.pop(setup.frame, None)  # re-inserted last
     RESULTS[setup.frame] = {
         "frame": setup.frame, "rgba": image.rgba, "aovs": image.aovs, "event": setup.event,
@@ -350,11 +398,13 @@ def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float,
         "export_seconds": setup.exported.seconds, "prepare_seconds": prepare_seconds,
         "render_seconds": stats.seconds, "warnings": list(setup.exported.warnings.messages),
         "triangles": len(setup.exported.scene.triangles),
-        "exposure": exposure,
+        "exposure": exposure, "planes": planes or {}, "started": _STARTED[0],
     }
     while len(RESULTS) > RESULTS_KEPT:
         RESULTS.pop(next(iter(RESULTS)))
 
+
+_STARTED = [0.0]  # time.time() when the last frame's render began (written_file)
 
 #: Seconds from a test_break request to the core stopping, in the last cancelled render.
 LAST_CANCEL_LATENCY: float | None = None
@@ -448,6 +498,8 @@ def register() -> None:
                      bpy.app.handlers.render_cancel):
         if clear_caches not in handlers:
             handlers.append(clear_caches)
+    if passes_into_file not in bpy.app.handlers.render_write:
+        bpy.app.handlers.render_write.append(passes_into_file)
 
 
 def unregister() -> None:
@@ -455,6 +507,8 @@ def unregister() -> None:
                      bpy.app.handlers.render_cancel):
         while clear_caches in handlers:
             handlers.remove(clear_caches)
+    while passes_into_file in bpy.app.handlers.render_write:
+        bpy.app.handlers.render_write.remove(passes_into_file)
     clear_caches()
     free_prepared()
     bpy.utils.unregister_class(RelrayRenderEngine)

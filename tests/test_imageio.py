@@ -323,3 +323,24 @@ def test_temp_names_are_recognised(tmp_path):
         tmp = imageio.temp_path_for(tmp_path / name)
         assert tmp.parent == tmp_path and tmp.suffix == Path(name).suffix
         assert tmp.name.startswith(".") and imageio._TEMP_RE.match(tmp.name)
+
+
+def test_add_exr_channels_keeps_the_file_and_appends(tmp_path):
+    """Channels are appended to an EXR (pixels, channels and metadata kept); channels it
+    already has are left alone."""
+    from relray.core.output.imageio import add_exr_channels, write_exr
+
+    rng = np.random.default_rng(1)
+    rgba = rng.random((5, 7, 4)).astype(np.float32)
+    path = tmp_path / "a.exr"
+    write_exr(path, rgba, {}, {"relray:frame": 3})
+    extra = rng.random((5, 7)).astype(np.float32)
+    assert add_exr_channels(path, {"Layer.Doppler.D": extra, "R": extra}) == ["Layer.Doppler.D"]
+    buf = oiio.ImageBuf(str(path))
+    spec = buf.spec()
+    assert list(spec.channelnames) == ["R", "G", "B", "A", "Layer.Doppler.D"]
+    px = buf.get_pixels(oiio.FLOAT)
+    np.testing.assert_array_equal(px[..., :4], rgba)
+    np.testing.assert_array_equal(px[..., 4], extra)
+    assert spec.get_string_attribute("relray:frame") == "3"
+    assert add_exr_channels(path, {"Layer.Doppler.D": extra}) == []

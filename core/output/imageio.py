@@ -303,6 +303,38 @@ def write_exr(
     _write_image(Path(path), pixels, names, oiio.FLOAT, attrs, alpha_channel=3)
 
 
+def add_exr_channels(path: Path, planes: Mapping[str, np.ndarray]) -> list[str]:
+    """Append float channels to an existing single-part EXR (atomically rewritten, its
+    other channels, pixels and metadata kept). ``planes``: channel name -> (h, w), row 0
+    at the top. Channels the file already has are left as they are; returns the names
+    added. (The Blender add-on's passes into the multilayer EXR Blender 5.0 writes
+    with only its Combined layer.)"""
+    path = Path(path)
+    inp = _open_input(path)
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(oiio.FLOAT)
+    finally:
+        inp.close()
+    if pixels is None:
+        raise UserError(f"cannot read image: {oiio.geterror()}", file=path)
+    h, w = spec.height, spec.width
+    names = list(spec.channelnames)
+    new = [n for n in planes if n not in names]
+    if not new:
+        return []
+    stack = [np.asarray(pixels, np.float32).reshape(h, w, len(names))]
+    stack += [_check_plane(n, planes[n], (h, w))[..., None] for n in new]
+    out = oiio.ImageSpec(spec)
+    out.nchannels = len(names) + len(new)
+    out.channelnames = tuple(names + new)
+    out.set_format(oiio.FLOAT)
+    out.channelformats = ()
+    data = np.ascontiguousarray(np.concatenate(stack, axis=2))
+    atomic_write(path, lambda tmp: write_pixels(tmp, path, data, out))
+    return new
+
+
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
     """sRGB OETF of linear values clipped to [0, 1] (NaN -> 0), float64 in [0, 1]."""
     x = np.clip(np.nan_to_num(np.asarray(linear, dtype=np.float64), nan=0.0), 0.0, 1.0)

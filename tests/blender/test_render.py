@@ -69,10 +69,18 @@ def test_passes_registered(cornell, engine, tmp_path):
     rendering.set_output(scene, tmp_path, "passes", "EXR_MULTILAYER")
     rendering.render_still(scene, write=True)
     assert set(engine.RESULTS[1]["aovs"]) == {"depth", "doppler", "lab_time"}
-    if bpy.app.version < (5, 0, 0):  # 5.0 writes only the combined pass to the file
-        channels = rendering.exr_channels(tmp_path / "passes.exr")
-        for ch in ("Combined.R", "Combined.A", "Depth.Z", "Doppler.D", "LabTime.T"):
-            assert f"{layer.name}.{ch}" in channels, channels
+    # (Blender 5.0 itself writes only Combined there; the engine adds its passes)
+    channels = rendering.exr_channels(tmp_path / "passes.exr")
+    for ch in ("Combined.R", "Combined.A", "Depth.Z", "Doppler.D", "LabTime.T"):
+        assert f"{layer.name}.{ch}" in channels, channels
+    import OpenImageIO as oiio  # noqa: N813
+
+    buf = oiio.ImageBuf(str(tmp_path / "passes.exr"))
+    names = list(buf.spec().channelnames)
+    px = buf.get_pixels(oiio.FLOAT)
+    for ch, aov in (("Depth.Z", "depth"), ("Doppler.D", "doppler"), ("LabTime.T", "lab_time")):
+        plane = px[..., names.index(f"{layer.name}.{ch}")]
+        np.testing.assert_array_equal(plane, engine.RESULTS[1]["aovs"][aov])
 
 
 def test_keyframed_beta_animation(cornell, engine, tmp_path):
