@@ -50,6 +50,8 @@ SCRIPT_CANCEL = None
 # plus the worldline clock's inputs; cleared when a render job starts or ends.
 _HISTORY: dict[tuple[str, str], dict[int, np.ndarray]] = {}
 _CLOCK: dict[tuple[str, str], tuple[float, float]] = {}
+# The warnings already reported in this render job.
+_WARNED: set[str] = set()
 # The stops applied to the last frame of this render job, per scene (auto exposure).
 _EXPOSURE: dict[str, float] = {}
 # World matrices sampled for motion from the animation, per render job and scene.
@@ -72,6 +74,7 @@ def clear_caches(*_args) -> None:
     _CLOCK.clear()
     _SAMPLES.clear()
     _EXPOSURE.clear()
+    _WARNED.clear()
 
 
 @bpy.app.handlers.persistent
@@ -171,6 +174,9 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         except InterruptedError:  # cancelled while exporting
             return
         for message in setup.exported.warnings.messages:
+            if message in _WARNED:  # once per render job, not once per frame
+                continue
+            _WARNED.add(message)
             print(f"relray: warning: {message}", flush=True)
             self.report({"WARNING"}, message)
         self._render_frame(depsgraph, setup)
@@ -277,6 +283,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         passes = enabled_passes(layer)
         aovs = tuple(PASSES[p][3] for p in passes if PASSES[p][3] is not None)
         _STARTED[0] = time.time()
+        check_fits(settings, aovs, len(ex.scene.triangles))
         self.update_stats("", f"Frame {setup.frame} | preparing")
         t_prep = time.perf_counter()
         prep = prepared_scene(ex.scene, rs.spectral)
@@ -418,6 +425,23 @@ def auto_exposure(scene, rgba: np.ndarray):
     fe = exposure.frame_exposure(rgba, _EXPOSURE.get(scene.name))
     _EXPOSURE[scene.name] = fe.stops
     return fe
+
+
+def check_fits(settings, aovs: tuple[str, ...], triangles: int) -> None:
+    """The core's memory check (as ``relray render`` makes it): a render that would not
+    fit stops with a RenderFailed, before anything is allocated."""
+    from pathlib import Path
+
+    from ..core.errors import UserError
+    from ..core.scene.description import OutputSettings
+    from ..core.scene.footprint import check_memory
+
+    try:
+        check_memory(settings, OutputSettings(Path("."), aovs=aovs),
+                     [("the scene's meshes", triangles)], None)
+    except UserError as e:
+        raise RenderFailed(f"the render would not fit in memory: {e.detail} (Output › "
+                           "Resolution, or the passes)") from None
 
 
 def scene_clock(scene):

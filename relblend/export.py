@@ -72,6 +72,8 @@ from ..core.scene.worldlines import rest_frame_offsets
 
 #: Object types that ``to_mesh`` turns into triangles.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+#: The colour of an image texture whose file is missing (Cycles' magenta).
+MISSING_TEXTURE = np.array([1.0, 0.0, 1.0])
 #: Blender's default surface (no material): as the core's glTF default.
 DEFAULT_MATERIAL = core_job.material_from_dict(
     {"name": "relray_default", "base_color": (0.8, 0.8, 0.8), "roughness": 0.5})
@@ -224,12 +226,18 @@ class _Reader:
             return np.asarray(sock.default_value[:3], np.float64)
         if src.type == "RGB":
             return np.asarray(src.outputs[0].default_value[:3], np.float64)
-        if src.type == "TEX_IMAGE" and src.image is not None:
-            mean = image_mean_color(src.image)
+        if src.type == "TEX_IMAGE":
+            mean = None if src.image is None else image_mean_color(src.image)
             if mean is not None:
                 self.warn(f"image texture '{src.image.name}' on '{name}' is used as its mean "
                           "colour (the core has no textures yet)")
                 return mean
+            what = ("has no image" if src.image is None else
+                    f"image '{src.image.name}' cannot be read (file "
+                    f"'{src.image.filepath_from_user()}' missing?)")
+            self.warn(f"the image texture on '{name}' {what}: rendered magenta, as Cycles "
+                      "does")
+            return MISSING_TEXTURE
         if src.type == "BLACKBODY" and emission:
             temp = self.value(src, "Temperature", 6500.0)
             self.blackbody = max(temp, 1.0)
@@ -319,9 +327,15 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
         em_color = r.color(surface, em_name, (0.0, 0.0, 0.0), emission=True)
         strength = r.value(surface, "Emission Strength", 1.0)
         for weight, label in (("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
-                              ("Subsurface Weight", "subsurface")):
+                              ("Subsurface Weight", "subsurface"),
+                              ("Anisotropic", "anisotropy"),
+                              ("Thin Film Thickness", "thin film")):
             if r.value(surface, weight, 0.0) > 0.0:
                 r.warn(f"{label} is not supported and is ignored")
+        transmission = r.value(surface, _first_input(surface, "Transmission Weight",
+                                                     "Transmission"), 0.0)
+        if transmission > 0.0 and r.value(surface, "Roughness", 0.5) > 0.0:
+            r.warn("rough glass is rendered smooth (the glass lobe ignores roughness)")
         if r.value(surface, "Alpha", 1.0) < 1.0:
             r.warn("alpha (transparency) is not supported and is ignored")
         if surface.inputs.get("Normal") is not None and surface.inputs["Normal"].is_linked:
@@ -331,8 +345,7 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
             name, base,
             roughness=r.value(surface, "Roughness", 0.5),
             metallic=r.value(surface, "Metallic", 0.0),
-            transmission=r.value(surface, _first_input(surface, "Transmission Weight",
-                                                       "Transmission"), 0.0),
+            transmission=transmission,
             ior=r.value(surface, "IOR", 1.5),
             emission=emission, emission_strength=em_strength, blackbody=r.blackbody)
     if kind == "EMISSION":
@@ -346,6 +359,8 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
         return _values(name, r.color(surface, "Color", (0.8, 0.8, 0.8)),
                        roughness=r.value(surface, "Roughness", 0.5), metallic=1.0)
     if kind == "BSDF_GLASS":
+        if r.value(surface, "Roughness", 0.0) > 0.0:
+            r.warn("rough glass is rendered smooth (the glass lobe ignores roughness)")
         return _values(name, r.color(surface, "Color", (1.0, 1.0, 1.0)),
                        roughness=r.value(surface, "Roughness", 0.0), transmission=1.0,
                        ior=r.value(surface, "IOR", 1.5))

@@ -1,0 +1,85 @@
+"""What artists already have in Cycles: warnings once, missing images, ignored features
+named, renders that would not fit refused."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import pytest
+import rendering
+import scenes
+from conftest import ext_module
+
+
+def odd_material(folder) -> bpy.types.Material:
+    """A Principled BSDF with an image on its base colour whose file has gone, anisotropy,
+    a thin film and rough glass."""
+    mat = scenes.principled("odd", (0.5, 0.5, 0.5))
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    made = bpy.data.images.new("brick", 4, 4)
+    path = folder / "brick.png"
+    made.filepath_raw = str(path)
+    made.file_format = "PNG"
+    made.save()
+    bpy.data.images.remove(made)
+    img = bpy.data.images.load(str(path), check_existing=False)
+    path.unlink()  # moved away after the .blend was set up
+    img.reload()
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    mat.node_tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    bsdf.inputs["Anisotropic"].default_value = 0.5
+    bsdf.inputs["Thin Film Thickness"].default_value = 300.0
+    bsdf.inputs["Transmission Weight"].default_value = 1.0
+    bsdf.inputs["Roughness"].default_value = 0.3
+    return mat
+
+
+def test_a_missing_image_is_magenta_and_every_ignored_feature_named_once(cornell, engine,
+                                                                         tmp_path, capsys):
+    scene = cornell
+    box = next(o for o in scene.objects if o.type == "MESH")
+    box.data.materials.clear()
+    box.data.materials.append(odd_material(tmp_path))
+    scene.frame_start, scene.frame_end = 1, 3
+    rendering.set_output(scene, tmp_path, "anim_", "PNG")
+    rendering.render_animation(scene)
+    out = capsys.readouterr().out
+    warned = [line for line in out.splitlines() if line.startswith("relray: warning:")]
+    for what in ("rendered magenta", "anisotropy", "thin film", "rough glass"):
+        hits = [w for w in warned if what in w]
+        assert len(hits) == 1, (what, warned)  # once per render, not once per frame
+    assert "brick.png" in next(w for w in warned if "magenta" in w)
+    export = ext_module("relblend.export")
+    ex = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    odd = next(m for m in ex.scene.materials if m.name == "odd")
+    assert odd.base_color == pytest.approx((1.0, 0.0, 1.0))
+
+
+def test_a_render_that_would_not_fit_is_refused(cornell, engine, monkeypatch):
+    """As `relray render` does: a clear error naming the memory, not a traceback and a
+    blank image reported as finished."""
+    resources = ext_module("core.resources")
+    monkeypatch.setattr(resources, "memory_limit",
+                        lambda *a: resources.MemoryLimit(1 << 20, "a test limit"))
+    engine.RESULTS.clear()
+    with pytest.raises(RuntimeError, match=r"would not fit in memory: needs about .* GiB "
+                                           r"of memory .* a test limit"):
+        rendering.render_still(cornell)
+    assert not engine.RESULTS
+
+
+def test_an_animation_reports_each_warning_once(cornell, engine, tmp_path, capsys):
+    scene = cornell
+    mat = scenes.principled("coat", (0.5, 0.5, 0.5))
+    mat.node_tree.nodes["Principled BSDF"].inputs["Coat Weight"].default_value = 1.0
+    box = next(o for o in scene.objects if o.type == "MESH")
+    box.data.materials.clear()
+    box.data.materials.append(mat)
+    scene.frame_start, scene.frame_end = 1, 2
+    rendering.set_output(scene, tmp_path, "anim_", "PNG")
+    rendering.render_animation(scene)
+    assert capsys.readouterr().out.count("relray: warning: material 'coat': coat") == 1
+    rendering.render_still(scene)  # a new render job: warned again
+    assert capsys.readouterr().out.count("relray: warning: material 'coat': coat") == 1
+    assert np.isfinite(engine.RESULTS[scene.frame_current]["rgba"]).all()
