@@ -277,6 +277,8 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         w, h = ex.width, ex.height
         threads = rs.threads or scene.render.threads
         settings = RenderSettings(width=w, height=h, spp=rs.samples, max_depth=rs.max_depth,
+                                  noise_threshold=(rs.adaptive_threshold
+                                                   if rs.use_adaptive_sampling else 0.0),
                                   seed=rs.seed, spectral=rs.spectral, doppler=rs.doppler,
                                   searchlight=rs.searchlight, threads=threads)
         layer = depsgraph.view_layer
@@ -403,7 +405,8 @@ def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float,
         "frame": setup.frame, "rgba": image.rgba, "aovs": image.aovs, "event": setup.event,
         "gamma": setup.gamma, "d_range": (stats.d_min, stats.d_max),
         "export_seconds": setup.exported.seconds, "prepare_seconds": prepare_seconds,
-        "render_seconds": stats.seconds, "warnings": list(setup.exported.warnings.messages),
+        "render_seconds": stats.seconds, "paths": stats.paths,
+        "warnings": list(setup.exported.warnings.messages),
         "triangles": len(setup.exported.scene.triangles),
         "exposure": exposure, "planes": planes or {}, "started": _STARTED[0],
     }

@@ -35,8 +35,9 @@ moving objects      an object F12 moves (``object.relray.velocity`` ≠ 0): its 
 [camera]            position, rotation (3×3 rows), vertical fov, shift
 [motion]            mode; ct', ct' per frame; one keyframe per frame (β in world axes,
                     evaluated with every F-curve, driver, parent and constraint)
-[render]            size (resolution % applied), samples, max depth, seed, spectral model,
-                    Doppler, searchlight
+[render]            size (resolution % applied), samples, noise threshold, max depth, seed,
+                    spectral model, Doppler, searchlight
+[output]            exposure "auto" with Auto Exposure (the PNG; Blender scales Combined)
 ==================  ========================================================================
 
 Limits (each a clear :class:`FarmExportError`): the camera must not move or turn
@@ -539,8 +540,11 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
     job: dict[str, Any] = {
         "render": {"width": exported.width, "height": exported.height, "spp": rs.samples,
                    "max_depth": rs.max_depth, "seed": rs.seed, "spectral": rs.spectral,
-                   "doppler": rs.doppler, "searchlight": rs.searchlight, "threads": 0},
-        "output": {"dir": "out", "name": "frame_{frame:04d}", "formats": ["exr", "png"]},
+                   "doppler": rs.doppler, "searchlight": rs.searchlight, "threads": 0,
+                   "noise_threshold": rs.adaptive_threshold if rs.use_adaptive_sampling
+                   else 0.0},
+        "output": {"dir": "out", "name": "frame_{frame:04d}", "formats": ["exr", "png"],
+                   "exposure": "auto" if rs.auto_exposure else 0.0},
         "camera": {"position": [float(x) for x in cam_settings.position],
                    "rotation": np.asarray(cam_settings.rotation).tolist(),
                    "fov": cam_settings.fov, "shift": list(cam_settings.shift)},

@@ -174,6 +174,14 @@ class RelraySceneSettings(bpy.types.PropertyGroup):
 
     samples: IntProperty(name="Samples", description="Samples per pixel", min=1,
                          soft_max=4096, default=64)
+    use_adaptive_sampling: BoolProperty(
+        name="Noise Threshold", default=False,
+        description="Adaptive sampling: stop a pixel once its relative error (and its 3×3 "
+                    "neighbourhood's) is below the threshold; Samples is then the cap")
+    adaptive_threshold: FloatProperty(
+        name="Threshold", description="Relative error at which a pixel stops (the core's "
+        "render.noise_threshold)", min=0.0001, soft_max=0.5, default=0.01, precision=4,
+        step=0.1)
     max_depth: IntProperty(name="Max Bounces", description="Path segments (max_depth)",
                            min=1, soft_max=64, default=8)
     seed: IntProperty(name="Seed", description="Random seed (the same seed, the same image)",

@@ -219,7 +219,14 @@ class RELRAY_PT_sampling(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender 
         layout = self.layout
         layout.use_property_split = True
         rs = context.scene.relray
-        layout.prop(rs, "samples")
+        heading = layout.column(heading="Noise Threshold", align=True)
+        row = heading.row(align=True)
+        row.prop(rs, "use_adaptive_sampling", text="")
+        sub = row.row()
+        sub.active = rs.use_adaptive_sampling
+        sub.prop(rs, "adaptive_threshold", text="")
+        layout.prop(rs, "samples", text="Max Samples" if rs.use_adaptive_sampling else
+                    "Samples")
         layout.prop(rs, "max_depth")
         layout.prop(rs, "seed")
         layout.prop(rs, "threads")

@@ -83,3 +83,23 @@ def test_an_animation_reports_each_warning_once(cornell, engine, tmp_path, capsy
     rendering.render_still(scene)  # a new render job: warned again
     assert capsys.readouterr().out.count("relray: warning: material 'coat': coat") == 1
     assert np.isfinite(engine.RESULTS[scene.frame_current]["rgba"]).all()
+
+
+def test_the_noise_threshold_stops_converged_pixels(cornell, engine, tmp_path):
+    """Noise Threshold on (Cycles' adaptive sampling): Samples becomes a cap and pixels
+    stop early, so fewer paths are traced than width × height × samples; the farm job
+    carries the threshold."""
+    scene = cornell
+    scene.relray.samples = 256
+    rendering.render_still(scene)
+    full = engine.RESULTS[1]["paths"]
+    assert full == 48 * 48 * 256
+    scene.relray.use_adaptive_sampling = True
+    scene.relray.adaptive_threshold = 0.2
+    rendering.render_still(scene)
+    assert engine.RESULTS[1]["paths"] < 0.8 * full
+    assert bpy.ops.relray.export_farm(directory=str(tmp_path / "farm")) == {"FINISHED"}
+    import tomllib
+
+    job = tomllib.loads((tmp_path / "farm" / "job.toml").read_text())
+    assert job["render"]["noise_threshold"] == pytest.approx(0.2)
