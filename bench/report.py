@@ -224,7 +224,7 @@ def write(out: Path, md: Path) -> Path:
         "throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
         "convergence_medians", "equal_error", "converged_compare", "adaptive_gain",
         "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups",
-        "moving_emitter_noise")}
+        "moving_emitter_noise", "first_render")}
     conv_cfg = meta.get("sections", {}).get("convergence", {}).get("config")
     if d["convergence_medians"] and conv_cfg:
         # derived tables: recomputed from the medians, so they follow this module's rules
@@ -356,6 +356,7 @@ def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
     _section_adaptive(add, d, plots, md)
     _section_skips(add, d)
     _section_moving(add, d)
+    _section_first(add, d)
     _section_profile(add, d, plots, md, meta)
     _section_recommendations(add, d)
     _section_missing(add, d, meta)
@@ -735,6 +736,22 @@ def _section_skips(add, d) -> None:
                 f"build_scene {r['build_scene_s']:.2f} s + prepare {r['prepare_s']:.2f} s, "
                 f"against a frame of {r['render_wall_s']:.2f} s at the heavy-scene "
                 f"resolution: {r['B_over_A']:.1f}× per frame if rebuilt every frame.\n")
+
+
+def _section_first(add, d) -> None:
+    add("## 5c. The first render in Blender\n")
+    rows = d["first_render"]
+    if not rows:
+        add("Not run.\n")
+        return
+    add("Blender's default scene (320×180, 16 spp, the Relativistic engine), each case a "
+        "new Blender session (bpy module) with the extension installed in a fresh user "
+        "directory (`bench/first_render.py`). *Cold*: an empty kernel cache. The warm-up "
+        "child starts when the add-on is enabled; the time to F12 is the artist's.\n")
+    add(table(rows, [("case", "case", ""),
+                     ("enable → kernels ready (s)", "warmup_s", ".1f"),
+                     ("F12 → frame (s)", "f12_s", ".1f")]))
+    add("")
 
 
 def _section_moving(add, d) -> None:

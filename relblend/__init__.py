@@ -14,6 +14,8 @@ module              owns
 ``farm``            scene.glb + job TOML for ``relray render``
 ``farm_run``        ``relray render`` in a child process: JSON progress, cancel (no bpy)
 ``presets``         the TOML motion profiles of presets/motion
+``warmup``          the render kernels compiled in a child process when enabled
+``animation``       motion from the animation: sampled worldlines and shutter events
 ``packaging``       building the extension zips (a tool for make; not loaded by Blender)
 ==================  ===================================================================
 
@@ -34,16 +36,24 @@ def _load():
 
 
 def register() -> None:
-    """Register properties, operators, panels and the engine (in that order)."""
+    """Register properties, operators, panels and the engine (in that order), then start
+    compiling the render kernels in the background (:mod:`.warmup`)."""
     global _modules
     _modules = _load()
     for module in _modules:
         module.register()
+    from . import properties, warmup
+
+    if properties.compile_at_startup():
+        warmup.start()
 
 
 def unregister() -> None:
     """Unregister everything register() registered, in reverse order."""
     global _modules
+    from . import warmup
+
+    warmup.unregister()
     for module in reversed(_modules or _load()):
         module.unregister()
     _modules = None

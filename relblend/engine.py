@@ -269,8 +269,14 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         from ..core.render import frames as core_render
         from ..core.render.camera import PinholeCamera
         from ..core.scene.description import RenderSettings
+        from . import warmup
         from .motion import view_doppler_range
 
+        if warmup.running():
+            self.update_stats("", f"Frame {setup.frame} | waiting for the render kernels "
+                                  "to compile (first use)")
+            if not warmup.wait(self.test_break):
+                return
         scene = depsgraph.scene
         rs = scene.relray
         ex = setup.exported

@@ -269,14 +269,26 @@ class RelrayPreferences(bpy.types.AddonPreferences):
                     "with a scheduler, a folder every worker sees at the same path. Empty: "
                     "relray_farm beside the .blend file (in the temp folder if unsaved)")
 
+    compile_kernels: BoolProperty(
+        name="Compile Kernels at Start-up", default=True,
+        description="When the add-on is enabled, compile (or load) the render kernels in a "
+                    "background process, so the first render does not wait for them")
+
     def draw(self, context):
         layout = self.layout
         layout.use_property_split = True
+        layout.prop(self, "compile_kernels")
         layout.prop(self, "scheduler")
         row = layout.row()
         row.enabled = bool(self.scheduler.strip())
         row.prop(self, "connect_timeout")
         layout.prop(self, "farm_directory")
+
+
+def compile_at_startup() -> bool:
+    """The "Compile Kernels at Start-up" preference (True while it cannot be read yet)."""
+    prefs = addon_preferences(bpy.context)
+    return True if prefs is None else bool(prefs.compile_kernels)
 
 
 def addon_preferences(context):

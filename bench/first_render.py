@@ -1,0 +1,102 @@
+"""Time to the first rendered frame in a fresh Blender user directory (issue: "first
+render without a wait").
+
+Each case runs the bpy module in a new process with a new ``BLENDER_USER_RESOURCES``
+(the extension zip installed and enabled there, as an artist does) and Blender's default
+scene (cube, light, camera; 320×180 at 16 spp, the Relativistic engine):
+
+- **cold, F12 at once**: an empty kernel cache, F12 right after enabling (what a first
+  render cost before the warm-up: the kernels compile inside it);
+- **cold, warm-up**: an empty kernel cache; enabling starts the warm-up child
+  (``relblend.warmup``, forced: the bpy module is a background Blender), the artist
+  builds the scene meanwhile (modelled as waiting until it is done), then F12;
+- **warm**: a second session (same user directory and kernel cache), F12 at once.
+
+Reported: seconds from enabling to the warm-up's end, and from F12 to the finished
+frame (the first pixel of a frame is shown when its render ends).
+
+    .venv/bin/python -m relray.bench.first_render
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+DRIVER = r"""
+import json, sys, time
+import bpy
+import importlib, os
+zip_path, warm = sys.argv[1], sys.argv[2] == "1"
+t_enabled = time.perf_counter()
+installed = os.path.join(os.environ["BLENDER_USER_RESOURCES"], "extensions", "user_default",
+                         "relray")
+if os.path.isdir(installed):  # a later session: the add-on is there, enable it
+    bpy.ops.preferences.addon_enable(module="bl_ext.user_default.relray")
+else:
+    bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default",
+                                             enable_on_install=True)
+ext = importlib.import_module("bl_ext.user_default.relray")
+warmup = importlib.import_module("bl_ext.user_default.relray.relblend.warmup")
+warm_seconds = None
+if warm:
+    warmup.start(force=True)
+    warmup.wait()
+    warm_seconds = time.perf_counter() - t_enabled
+bpy.ops.wm.read_homefile()
+scene = bpy.context.scene
+scene.render.engine = "RELRAY"
+scene.render.resolution_x, scene.render.resolution_y = 320, 180
+scene.render.resolution_percentage = 100
+scene.relray.samples = 16
+t0 = time.perf_counter()
+bpy.ops.render.render()
+print(json.dumps({"warmup": warm_seconds, "f12": time.perf_counter() - t0}))
+"""
+
+
+def run_case(zip_path: Path, user: Path, kernels: Path, warm: bool) -> dict:
+    """One Blender session (a bpy-module process) on the ``user`` directory."""
+    user.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(user), NUMBA_CACHE_DIR=str(kernels))
+    out = subprocess.run([sys.executable, "-c", DRIVER, str(zip_path), "1" if warm else "0"],
+                         env=env, capture_output=True, text=True, timeout=1800)
+    if out.returncode != 0:
+        raise RuntimeError(out.stderr[-3000:])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def rows() -> list[dict]:
+    """The three cases, in order: {case, warmup_s (None: none ran), f12_s}."""
+    from relray.relblend import packaging
+
+    work = Path(tempfile.mkdtemp(prefix="relray-first-"))
+    try:
+        zip_path = packaging.build_test_zip(work / "relray.zip")
+        a, b = work / "a", work / "b"
+        cases = [("cold, F12 at once", run_case(zip_path, a / "user", a / "kernels", False)),
+                 ("cold, warm-up on enable", run_case(zip_path, b / "user", b / "kernels",
+                                                      True)),
+                 ("warm (second session)", run_case(zip_path, b / "user", b / "kernels",
+                                                    False))]
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return [{"case": name, "warmup_s": r["warmup"], "f12_s": r["f12"]} for name, r in cases]
+
+
+def main() -> int:
+    print("| case | enable → kernels ready (s) | F12 → frame (s) |")
+    print("|---|---|---|")
+    for r in rows():
+        w = "—" if r["warmup_s"] is None else f"{r['warmup_s']:.1f}"
+        print(f"| {r['case']} | {w} | {r['f12_s']:.1f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
