@@ -28,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import threading
 import time
+import weakref
 from dataclasses import dataclass
 
 import bpy
@@ -140,6 +141,67 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
     bl_use_postprocess = True
     bl_use_eevee_viewport = True
     bl_use_shading_nodes_custom = False
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.viewport = None  # a viewport.ViewportSession, made on the first view_draw
+        self.view_error: str | None = None
+        self.view_dirty = True
+        self.view_scene = None  # view_scene(): the exported and prepared scene
+
+    def __del__(self):
+        try:
+            session = self.viewport
+        except (ReferenceError, AttributeError):  # Blender freed the engine first
+            return
+        if session is not None:
+            session.stop()
+
+    # ------------------------------------------------------------------ viewport
+    def view_update(self, context, depsgraph):
+        """The scene changed (geometry, materials, lights, frame, settings): the next
+        draw exports it again and restarts the progressive render if it differs."""
+        self.view_dirty = True
+        self.tag_redraw()
+
+    def view_draw(self, context, depsgraph):
+        """Draw the newest progressive image of this view (never waits for the worker);
+        while it refines, ask for another redraw."""
+        from . import viewport, warmup
+
+        region = context.region
+        width, height = max(1, region.width), max(1, region.height)
+        if warmup.running():
+            self.update_stats("", "relray: compiling render kernels…")
+            self.tag_redraw()
+            return
+        if self.viewport is None:
+            self.viewport = viewport.ViewportSession()
+            _SESSIONS.add(self.viewport)
+        try:
+            if self.view_dirty or self.view_scene is None:
+                self.view_dirty = False
+                self.view_scene = None
+                self.view_scene = view_scene(context, depsgraph, width, height)
+            state = view_state(context, depsgraph, width, height, self.view_scene)
+            self.view_error = None
+        except RenderFailed as e:
+            self.view_error = str(e)
+            state = None
+        if state is not None:
+            self.viewport.show(state)
+        image = self.viewport.latest()
+        if self.viewport.error is not None:
+            self.view_error = f"{type(self.viewport.error).__name__}: {self.viewport.error}"
+        if image is not None and image.rgba.shape[:2] == (height, width):
+            draw_image(self, depsgraph.scene, image.rgba)
+        if self.view_error:
+            self.update_stats("", f"relray: {self.view_error}")
+        elif image is not None:
+            self.update_stats("", f"relray: {image.samples} spp"
+                                  + ("" if image.done else " …"))
+        if image is None or not image.done or image.key != getattr(state, "key", None):
+            self.tag_redraw()
 
     # ------------------------------------------------------------------ passes
     def update_render_passes(self, scene=None, renderlayer=None):
@@ -420,10 +482,158 @@ def _keep_result(setup: FrameSetup, image, stats, prepare_seconds: float,
         RESULTS.pop(next(iter(RESULTS)))
 
 
+#: The viewport sessions alive (stopped when the add-on is disabled).
+_SESSIONS: weakref.WeakSet = weakref.WeakSet()
 _STARTED = [0.0]  # time.time() when the last frame's render began (written_file)
 
 #: Seconds from a test_break request to the core stopping, in the last cancelled render.
 LAST_CANCEL_LATENCY: float | None = None
+
+
+def region_camera(context, width: int, height: int):
+    """The core camera of the 3D view being drawn."""
+    from . import export
+
+    rv3d = context.region_data
+    try:
+        return export.view_camera(np.array(rv3d.view_matrix), np.array(rv3d.window_matrix),
+                                  width, height)
+    except export.ExportError as e:
+        raise RenderFailed(str(e)) from None
+
+
+def view_scene(context, depsgraph, width: int, height: int):
+    """(exported scene, prepared scene, animated objects, content hash) for the viewport:
+    exported
+    again only after a ``view_update`` (the engine keeps it while the view just moves)."""
+    from ..core.errors import UserError
+    from . import export, motion
+
+    scene = depsgraph.scene
+    cam = region_camera(context, width, height)
+    try:
+        _, animated = view_motion(depsgraph, False, cam)
+        ex = export.export_scene(depsgraph, width=width, height=height, view=cam,
+                                 animated=animated)
+    except (export.ExportError, motion.MotionError, UserError) as e:
+        raise RenderFailed(str(e)) from None
+    mode = scene.relray.spectral
+    return ex, prepared_scene(ex.scene, mode), animated, scene_hash(ex.scene, mode)
+
+
+def view_state(context, depsgraph, width: int, height: int, exported):
+    """The :class:`.viewport.ViewState` of a 3D view: its own camera (the region's view
+    and projection matrices; through the scene camera in camera view, which then brings
+    its β and shutter event, else β = 0 at the scene clock's time), the scene of
+    :func:`view_scene` and the viewport sample count."""
+    from ..core.errors import UserError
+    from ..core.physics import relativity
+    from ..core.scene.description import RenderSettings
+    from . import motion, viewport
+
+    scene = depsgraph.scene
+    rs = scene.relray
+    ex, prep, _, scene_key = exported
+    cam = region_camera(context, width, height)
+    try:
+        event, _ = view_motion(depsgraph, context.region_data.view_perspective == "CAMERA",
+                               cam, objects=False)
+    except (motion.MotionError, UserError) as e:
+        raise RenderFailed(str(e)) from None
+    settings = RenderSettings(width=width, height=height, spp=max(1, rs.preview_samples),
+                              max_depth=rs.max_depth, seed=rs.seed, spectral=rs.spectral,
+                              doppler=rs.doppler, searchlight=rs.searchlight,
+                              threads=rs.threads or scene.render.threads)
+    key = hashlib.blake2b(repr((scene_key, np.asarray(
+        cam.rotation).tobytes(), np.asarray(cam.position).tobytes(), cam.fov, cam.shift,
+        relativity.ShutterEvent.four_position(event).tobytes(), event.beta.tobytes(),
+        settings)).encode(), digest_size=16).hexdigest()
+    return viewport.ViewState(key, prep, settings, cam, event, scene.frame_current)
+
+
+def view_motion(depsgraph, camera_view: bool, cam, objects: bool = True):
+    """(shutter event, animated objects) of the view. In camera view the scene camera's
+    motion as F12 has it at this frame (a worldline-mode camera: its β here, as a
+    snapshot at this frame's ct'); a free view is at rest. With the camera's motion from
+    its animation, the scene clock gives the time, and camera and objects move along
+    their location F-curves (sampled without changing the frame: the viewport cannot;
+    parents and constraints of a moving object are not followed there)."""
+    from . import animation, export, motion
+
+    scene = depsgraph.scene
+    obj = scene.camera
+    settings = obj.data.relray if obj is not None and obj.type == "CAMERA" else None
+    position = np.asarray(cam.position, np.float64)
+    if settings is None or settings.motion_source != "ANIMATION":
+        if not camera_view or settings is None:
+            return motion.snapshot_event(position, np.zeros(3), 0.0, scene.frame_current), {}
+        m = export.matrix_np(obj.evaluated_get(depsgraph).matrix_world)
+        beta = motion.camera_beta(settings, m, scene.frame_current)
+        ct = settings.ct + (settings.ct_per_frame * (scene.frame_current - scene.frame_start)
+                            if settings.mode == "WORLDLINE" else 0.0)
+        return motion.snapshot_event(position, beta, ct, scene.frame_current), {}
+    clock = scene_clock(scene)
+    names = animated_candidates(depsgraph) if objects else []
+    sampler = FcurveSampler(depsgraph, [*names, obj.name])
+    samples = animation.Samples({})
+    frame = scene.frame_current
+    moving = animation.object_motions(samples, names, clock, scene.frame_start,
+                                      scene.frame_end, frame, sampler.set_frame,
+                                      sampler.matrix_of) if names else {}
+    if camera_view:
+        event, _ = animation.camera_event(samples, obj.name, clock, scene.frame_start, frame,
+                                          sampler.set_frame, sampler.matrix_of)
+        event = motion.relativity.ShutterEvent(t=event.t, x=position, beta=event.beta,
+                                               tau=event.tau)
+    else:
+        event = motion.relativity.ShutterEvent(t=clock.t(frame), x=position,
+                                               beta=np.zeros(3), tau=0.0)
+    return event, moving
+
+
+class FcurveSampler:
+    """World matrices at other frames from the objects' location F-curves (the viewport
+    cannot change the frame): the current matrix with its translation replaced."""
+
+    def __init__(self, depsgraph, names):
+        from . import export, presets
+
+        self.frame = 0.0
+        self.base, self.curves = {}, {}
+        for name in names:
+            obj = bpy.data.objects[name]
+            self.base[name] = export.matrix_np(obj.evaluated_get(depsgraph).matrix_world)
+            curves = {}
+            if obj.parent is None and not obj.constraints:
+                for fc in presets.fcurves_of(obj):
+                    if fc.data_path == "location":
+                        curves[fc.array_index] = fc
+            self.curves[name] = curves
+
+    def set_frame(self, frame: int, subframe: float) -> None:
+        self.frame = frame + subframe
+
+    def matrix_of(self, name: str) -> np.ndarray:
+        m = self.base[name].copy()
+        for i, fc in self.curves[name].items():
+            m[i, 3] = fc.evaluate(self.frame)
+        return m
+
+
+def draw_image(engine, scene, rgba: np.ndarray) -> None:
+    """Draw a linear RGBA image over the region through the scene's view transform
+    (``bind_display_space_shader``), premultiplied alpha."""
+    import gpu
+    from gpu_extras.presets import draw_texture_2d
+
+    h, w = rgba.shape[:2]
+    buffer = gpu.types.Buffer("FLOAT", w * h * 4, np.ascontiguousarray(rgba).ravel())
+    texture = gpu.types.GPUTexture((w, h), format="RGBA16F", data=buffer)
+    gpu.state.blend_set("ALPHA_PREMULT")
+    engine.bind_display_space_shader(scene)
+    draw_texture_2d(texture, (0, 0), w, h)
+    engine.unbind_display_space_shader()
+    gpu.state.blend_set("NONE")
 
 
 def auto_exposure(scene, rgba: np.ndarray):
@@ -540,6 +750,8 @@ def unregister() -> None:
                      bpy.app.handlers.render_cancel):
         while clear_caches in handlers:
             handlers.remove(clear_caches)
+    for session in list(_SESSIONS):
+        session.stop()
     while passes_into_file in bpy.app.handlers.render_write:
         bpy.app.handlers.render_write.remove(passes_into_file)
     clear_caches()

@@ -528,6 +528,30 @@ def camera_settings(cam_obj_eval, width: int, height: int, render=None,
     )
 
 
+def view_camera(view_matrix: np.ndarray, window_matrix: np.ndarray, width: int,
+                height: int) -> core_job.CameraSettings:
+    """The core camera of a perspective 3D view: ``view_matrix`` (world → view) and
+    ``window_matrix`` (its projection, OpenGL convention, as ``RegionView3D`` holds them).
+    Vertical fov = 2 atan(1 / P11); the window's centre (P02 / P00, P12 / P11 at unit
+    distance) becomes the shift in units of the larger image side, as Blender's shift."""
+    from .motion import unit_rotation
+
+    to_world = np.linalg.inv(np.asarray(view_matrix, np.float64))
+    p = np.asarray(window_matrix, np.float64)
+    if p[3, 3] != 0.0:
+        raise ExportError("the view is orthographic; relray renders perspective views (press "
+                          "numpad 5)")
+    tan_v = 1.0 / p[1, 1]
+    tan_h = 1.0 / p[0, 0]
+    larger = 2.0 * (tan_h if width >= height else tan_v)
+    return core_job.CameraSettings(
+        position=_frozen(to_world[:3, 3]),
+        rotation=_frozen(unit_rotation(to_world[:3, :3])),
+        fov=math.degrees(2.0 * math.atan(tan_v)),
+        shift=(float(p[0, 2] / p[0, 0] / larger), float(p[1, 2] / p[1, 1] / larger)),
+    )
+
+
 # -------------------------------------------------------------------------- scene
 
 
@@ -645,13 +669,15 @@ def animated_motion(name: str, motion, warnings: Warnings) -> tuple[np.ndarray, 
 def export_scene(depsgraph, camera_obj=None, width: int | None = None,
                  height: int | None = None,
                  test_break: Callable[[], bool] | None = None,
-                 animated: dict[str, Any] | None = None) -> ExportedScene:
+                 animated: dict[str, Any] | None = None,
+                 view: core_job.CameraSettings | None = None) -> ExportedScene:
     """Export the evaluated depsgraph (the render's, or the viewport's) for the core.
 
     ``camera_obj``: the camera object (original or evaluated; default the scene's);
     ``width``/``height``: the render size (default from the scene's resolution);
     ``animated``: objects that move along their animation, by name
-    (``animation.ObjectMotion``; their own velocity is then ignored).
+    (``animation.ObjectMotion``; their own velocity is then ignored); ``view``: the camera
+    of a 3D view instead of a camera object's (the Rendered viewport).
     """
     animated = animated or {}
     t0 = time.perf_counter()
@@ -659,11 +685,14 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
     warnings = Warnings()
     if width is None or height is None:
         width, height = render_size(scene.render)
-    cam = camera_obj if camera_obj is not None else scene.camera
-    if cam is None:
-        raise ExportError("the scene has no active camera")
-    cam_eval = cam.evaluated_get(depsgraph)
-    camera = camera_settings(cam_eval, width, height, scene.render, warnings)
+    if view is not None:
+        camera = view
+    else:
+        cam = camera_obj if camera_obj is not None else scene.camera
+        if cam is None:
+            raise ExportError("the scene has no active camera")
+        cam_eval = cam.evaluated_get(depsgraph)
+        camera = camera_settings(cam_eval, width, height, scene.render, warnings)
 
     b = _Builder(warnings)
     lights: list[core_job.LightSpec] = []

@@ -182,6 +182,9 @@ class RelraySceneSettings(bpy.types.PropertyGroup):
         name="Threshold", description="Relative error at which a pixel stops (the core's "
         "render.noise_threshold)", min=0.0001, soft_max=0.5, default=0.01, precision=4,
         step=0.1)
+    preview_samples: IntProperty(
+        name="Viewport Samples", description="Samples per pixel of the Rendered viewport "
+        "(it refines progressively up to this count)", min=1, soft_max=1024, default=32)
     max_depth: IntProperty(name="Max Bounces", description="Path segments (max_depth)",
                            min=1, soft_max=64, default=8)
     seed: IntProperty(name="Seed", description="Random seed (the same seed, the same image)",

@@ -227,6 +227,7 @@ class RELRAY_PT_sampling(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender 
         sub.prop(rs, "adaptive_threshold", text="")
         layout.prop(rs, "samples", text="Max Samples" if rs.use_adaptive_sampling else
                     "Samples")
+        layout.prop(rs, "preview_samples")
         layout.prop(rs, "max_depth")
         layout.prop(rs, "seed")
         layout.prop(rs, "threads")
