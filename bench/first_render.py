@@ -89,12 +89,59 @@ def rows() -> list[dict]:
     return [{"case": name, "warmup_s": r["warmup"], "f12_s": r["f12"]} for name, r in cases]
 
 
+def viewport_rows(repeat: int = 3, width: int = 1280, height: int = 720) -> list[dict]:
+    """The Rendered viewport's first images (``relblend.viewport``, warm kernels): seconds
+    from a new view state to its quarter-size preview and to the first full-size sample,
+    Cornell box at a typical viewport size; medians of ``repeat`` runs."""
+    import statistics
+    import time
+    from dataclasses import replace
+
+    from relray.core.render.frames import prepare
+    from relray.core.scene.geometry import build_scene
+    from relray.core.scene.job import load_job
+    from relray.core.scene.motion import frame_events, resolve_camera
+    from relray.relblend import viewport
+
+    job = load_job(Path(__file__).resolve().parent.parent / "presets" / "cornell.toml")
+    scene = build_scene(job)
+    settings = replace(job.render, width=width, height=height, spp=4, threads=0,
+                       noise_threshold=0.0)
+    frame, event = frame_events(job)[0]
+    prep = prepare(scene, settings.spectral)
+    preview, full = [], []
+    for i in range(repeat + 1):  # the first run loads the kernels
+        state = viewport.ViewState(f"bench{i}", prep, settings, resolve_camera(job, scene),
+                                   event, frame)
+        session = viewport.ViewportSession()
+        t0 = time.perf_counter()
+        session.show(state)
+        first = None
+        while True:
+            image = session.latest()
+            if image is not None and first is None:
+                first = time.perf_counter() - t0
+            if image is not None and image.samples >= 1:
+                break
+            time.sleep(0.005)
+        done = time.perf_counter() - t0
+        session.stop()
+        if i:
+            preview.append(first)
+            full.append(done)
+    return [{"view": f"Cornell box {width}×{height}", "preview_s": statistics.median(preview),
+             "first_sample_s": statistics.median(full), "repeat": repeat}]
+
+
 def main() -> int:
     print("| case | enable → kernels ready (s) | F12 → frame (s) |")
     print("|---|---|---|")
     for r in rows():
         w = "—" if r["warmup_s"] is None else f"{r['warmup_s']:.1f}"
         print(f"| {r['case']} | {w} | {r['f12_s']:.1f} |")
+    for r in viewport_rows():
+        print(f"viewport {r['view']}: preview {r['preview_s']:.2f} s, first full-size "
+              f"sample {r['first_sample_s']:.2f} s")
     return 0
 
 

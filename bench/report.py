@@ -224,7 +224,7 @@ def write(out: Path, md: Path) -> Path:
         "throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
         "convergence_medians", "equal_error", "converged_compare", "adaptive_gain",
         "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups",
-        "moving_emitter_noise", "first_render")}
+        "moving_emitter_noise", "first_render", "viewport_first")}
     conv_cfg = meta.get("sections", {}).get("convergence", {}).get("config")
     if d["convergence_medians"] and conv_cfg:
         # derived tables: recomputed from the medians, so they follow this module's rules
@@ -752,6 +752,15 @@ def _section_first(add, d) -> None:
                      ("enable → kernels ready (s)", "warmup_s", ".1f"),
                      ("F12 → frame (s)", "f12_s", ".1f")]))
     add("")
+    if d["viewport_first"]:
+        add("The Rendered viewport (`relblend.viewport`, kernels loaded): seconds from a "
+            "new view to its quarter-size preview (1 spp) and to the first full-size "
+            f"sample, median of {d['viewport_first'][0]['repeat']:.0f}.\n")
+        add(table(d["viewport_first"], [("view", "view", ""),
+                                         ("preview (s)", "preview_s", ".2f"),
+                                         ("first full-size sample (s)", "first_sample_s",
+                                          ".2f")]))
+        add("")
 
 
 def _section_moving(add, d) -> None:
