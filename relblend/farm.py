@@ -37,7 +37,10 @@ moving objects      an object F12 moves (``object.relray.velocity`` ≠ 0): its 
                     evaluated with every F-curve, driver, parent and constraint)
 [render]            size (resolution % applied), samples, noise threshold, max depth, seed,
                     spectral model, Doppler, searchlight
-[output]            exposure "auto" with Auto Exposure (the PNG; Blender scales Combined)
+[output]            the PNGs through the scene's colour management: Blender's OCIO config
+                    copied to colormanagement/, display, view transform (AgX ...) and
+                    look as view_transform; the view's exposure, or "auto" with Auto
+                    Exposure (Blender scales Combined)
 ==================  ========================================================================
 
 Limits (each a clear :class:`FarmExportError`): the camera must not move or turn
@@ -178,6 +181,39 @@ def animation_motion(context, cam, frames: range, width: int, height: int,
                               "constant")
     doc = {"mode": "events", "frames": [frames[0], frames[-1]], "events": events}
     return doc, moving
+
+
+def colour_management(scene, out: Path, warnings: list[str]) -> dict[str, Any]:
+    """The job's PNG settings from the scene's colour management, so the farm's PNGs look
+    like F12's: Blender's OCIO config copied into ``out/colormanagement`` (once), its
+    display, view transform and look as ``output.view_transform``, the view's exposure
+    (or "auto" with Auto Exposure) as ``output.exposure``. Gamma and curves are not
+    carried (warned)."""
+    import os
+    import shutil
+
+    import bpy
+
+    vs, ds = scene.view_settings, scene.display_settings
+    source = Path(os.environ.get("OCIO", "") or "")
+    if not source.is_file():
+        folder = bpy.utils.system_resource("DATAFILES", path="colormanagement")
+        source = Path(folder) / "config.ocio"
+    target = out / "colormanagement"
+    if not (target / source.name).is_file():
+        shutil.copytree(source.parent, target, dirs_exist_ok=True)
+    if vs.gamma != 1.0 or vs.use_curve_mapping:
+        warnings.append("the view's gamma and curves are not carried into the farm's PNGs")
+    table: dict[str, Any] = {"view_transform": {
+        "config": f"colormanagement/{source.name}", "display": ds.display_device,
+        "view": vs.view_transform, "look": "" if vs.look in ("None", "") else vs.look}}
+    if scene.relray.auto_exposure:
+        table["exposure"] = "auto"
+        if vs.exposure != 0.0:
+            warnings.append("Auto Exposure replaces the view's exposure in the farm's PNGs")
+    else:
+        table["exposure"] = float(vs.exposure)
+    return table
 
 
 def check_static_camera(samples: list[FrameSample], tol: float = 1e-6) -> None:
@@ -537,6 +573,7 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
 
     rs = scene.relray
     cam_settings = exported.camera
+    cm_warnings: list[str] = []
     job: dict[str, Any] = {
         "render": {"width": exported.width, "height": exported.height, "spp": rs.samples,
                    "max_depth": rs.max_depth, "seed": rs.seed, "spectral": rs.spectral,
@@ -544,7 +581,7 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
                    "noise_threshold": rs.adaptive_threshold if rs.use_adaptive_sampling
                    else 0.0},
         "output": {"dir": "out", "name": "frame_{frame:04d}", "formats": ["exr", "png"],
-                   "exposure": "auto" if rs.auto_exposure else 0.0},
+                   **colour_management(scene, out, cm_warnings)},
         "camera": {"position": [float(x) for x in cam_settings.position],
                    "rotation": np.asarray(cam_settings.rotation).tolist(),
                    "fov": cam_settings.fov, "shift": list(cam_settings.shift)},
@@ -564,4 +601,5 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
     header = (f"relray farm export of '{bpy.data.filepath or 'unsaved file'}', scene "
               f"'{scene.name}', camera '{cam.name}'\nrender with: relray render {job_name}")
     job_path.write_text(toml_dumps(job, header), encoding="utf-8")
-    return FarmExport(job_path, glb, (f0, f1), list(exported.warnings.messages), plys)
+    return FarmExport(job_path, glb, (f0, f1),
+                      list(exported.warnings.messages) + cm_warnings, plys)

@@ -344,3 +344,42 @@ def test_add_exr_channels_keeps_the_file_and_appends(tmp_path):
     np.testing.assert_array_equal(px[..., 4], extra)
     assert spec.get_string_attribute("relray:frame") == "3"
     assert add_exr_channels(path, {"Layer.Doppler.D": extra}) == []
+
+
+def _blender_config():
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or spec.origin is None:
+        return None
+    found = sorted(Path(spec.origin).parent.glob("*/datafiles/colormanagement/config.ocio"))
+    return found[0] if found else None
+
+
+def test_a_png_through_blenders_agx_view_as_blender_writes_it(tmp_path):
+    """``output.view_transform``: pixels through Blender's config, display sRGB, view
+    AgX, get the codes of OCIO's own AgX display transform (from Linear Rec.709, which
+    the config's scene_linear role names); a bright saturated colour that the plain sRGB
+    curve clips keeps detail; the file names the transform."""
+    from relray.core.output.imageio import write_png
+    from relray.core.scene.description import ViewTransform
+
+    config = _blender_config()
+    assert config is not None, "bpy (a dev dependency) ships Blender's OCIO config"
+    rgba = np.zeros((1, 2, 4), np.float32)
+    rgba[0, 0] = (0.18, 0.18, 0.18, 1.0)
+    rgba[0, 1] = (4.0, 0.5, 0.05, 1.0)  # bright and saturated: AgX desaturates it
+    plain, agx = tmp_path / "plain.png", tmp_path / "agx.png"
+    write_png(plain, rgba)
+    write_png(agx, rgba, view=ViewTransform(config, "sRGB", "AgX"))
+    p = oiio.ImageBuf(str(plain)).get_pixels(oiio.UINT8)
+    a = oiio.ImageBuf(str(agx)).get_pixels(oiio.UINT8)
+    cc = oiio.ImageBuf(oiio.ImageSpec(2, 1, 4, oiio.FLOAT))
+    cc.set_pixels(oiio.ROI(), rgba)
+    ref = oiio.ImageBufAlgo.ociodisplay(cc, "sRGB", "AgX", fromspace="Linear Rec.709",
+                                        colorconfig=str(config)).get_pixels(oiio.FLOAT)
+    np.testing.assert_array_equal(a[0, :, :3], np.floor(ref[0, :, :3] * 255 + 0.5))
+    assert p[0, 1, 0] == 255 and a[0, 1, 0] < 255  # the plain curve clips, AgX does not
+    assert oiio.ImageBuf(str(agx)).spec().get_string_attribute(
+        "relray:view_transform") == "OCIO sRGB / AgX"

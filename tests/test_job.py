@@ -698,3 +698,34 @@ material = "w"
     summary = job.job_summary(j)
     assert "velocity group 1" in summary and "velocity group 2" in summary
     assert "segment 1: u (0, 0.75, 0)" in summary and "gamma 1.1547" in summary
+
+
+def test_a_view_transform_is_checked_when_the_job_loads(tmp_path):
+    """An unknown view (or display, look, or a config that is not one) fails before the
+    render, naming the key and the file."""
+    import importlib.util
+
+    from relray.core.errors import UserError
+    from relray.core.scene.job import parse_job
+
+    origin = Path(importlib.util.find_spec("bpy").origin).parent
+    config = sorted(origin.glob("*/datafiles/colormanagement/config.ocio"))[0]
+    base = {"objects": [{"shape": "sphere", "center": [0, 0, 1], "radius": 0.5,
+                         "material": "m"}], "materials": [{"name": "m"}]}
+    job = parse_job({**base, "output": {"view_transform": {"config": str(config),
+                                                           "view": "AgX"}}},
+                    tmp_path / "job.toml")
+    assert job.output.view_transform.view == "AgX"
+    assert job.output.view_transform.config == config
+    for table, key in (({"config": str(config), "view": "Agx"}, "view"),
+                       ({"config": str(config), "display": "Nope"}, "display"),
+                       ({"config": str(config), "look": "Very Punchy"}, "look")):
+        with pytest.raises(UserError) as e:
+            parse_job({**base, "output": {"view_transform": table}}, tmp_path / "job.toml")
+        assert e.value.key == f"output.view_transform.{key}", e.value
+    bad = tmp_path / "bad.ocio"
+    bad.write_text("not a config\n")
+    with pytest.raises(UserError) as e:
+        parse_job({**base, "output": {"view_transform": {"config": str(bad)}}},
+                  tmp_path / "job.toml")
+    assert e.value.key == "output.view_transform.config"

@@ -345,7 +345,7 @@ def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
     meta.update(exposure.metadata())
     try:
         paths = write_frame(job.output.dir, frame_stem(job, frame), job.output.formats,
-                            image, meta, exposure.stops)
+                            image, meta, exposure.stops, job.output.view_transform)
     except UserError as e:  # name the job file, and the file written as part of the message
         if e.file is None or e.file == str(job.path):
             raise

@@ -360,18 +360,49 @@ def png_codes(rgba: np.ndarray, exposure: float = 0.0, alpha: bool = False) -> n
     return np.concatenate([to_8bit(srgb_encode(straight)), to_8bit(a)[..., None]], axis=2)
 
 
+def display_codes(rgba: np.ndarray, exposure: float, view) -> np.ndarray:
+    """8-bit codes of linear Rec.709 ``rgba`` × 2**exposure through an OpenColorIO display
+    view (``description.ViewTransform``: config, display, view, look), from the config's
+    ``scene_linear`` role (Blender's config: Linear Rec.709), alpha unpremultiplied as
+    for the plain PNG. Returns (h, w, 4) uint8 (straight alpha)."""
+    rgba = np.asarray(rgba, np.float32).copy()
+    rgba[..., :3] *= np.float32(2.0 ** float(exposure))
+    h, w = rgba.shape[:2]
+    buf = oiio.ImageBuf(oiio.ImageSpec(w, h, 4, oiio.FLOAT))
+    buf.set_pixels(oiio.ROI(), np.nan_to_num(rgba, nan=0.0, posinf=0.0, neginf=0.0))
+    out = oiio.ImageBufAlgo.ociodisplay(buf, view.display, view.view, fromspace="scene_linear",
+                                        looks=view.look, unpremult=True,
+                                        colorconfig=str(view.config))
+    if out.has_error:
+        raise UserError(f"the view transform failed: {out.geterror()}",
+                        key="output.view_transform", file=view.config)
+    px = np.asarray(out.get_pixels(oiio.FLOAT), np.float64).reshape(h, w, 4)
+    return to_8bit(np.clip(px, 0.0, 1.0))
+
+
 def write_png(
     path: Path,
     rgba: np.ndarray,
     exposure: float = 0.0,
     alpha: bool = False,
     metadata: Mapping[str, MetadataValue] | None = None,
+    view=None,
 ) -> None:
-    """8-bit sRGB PNG of linear Rec.709 ``rgba`` × 2**exposure (RGB, or RGBA if alpha)."""
-    codes = png_codes(rgba, exposure, alpha)
+    """8-bit sRGB PNG of linear Rec.709 ``rgba`` × 2**exposure (RGB, or RGBA if alpha);
+    with ``view`` (``description.ViewTransform``) through that OCIO display view instead
+    of the plain sRGB curve, named in the file (``relray:view_transform``)."""
+    if view is None:
+        codes = png_codes(rgba, exposure, alpha)
+        transform = "sRGB (IEC 61966-2-1)"
+    else:
+        codes = display_codes(rgba, exposure, view)
+        codes = codes if alpha else codes[..., :3]
+        transform = f"OCIO {view.display} / {view.view}" + (f" / {view.look}" if view.look
+                                                             else "")
     names = RGBA_CHANNELS[: codes.shape[2]]
     # The bytes are final: stop OpenImageIO from un-premultiplying them again.
-    attrs = {"oiio:ColorSpace": "sRGB", "oiio:UnassociatedAlpha": 1, **dict(metadata or {})}
+    attrs = {"oiio:ColorSpace": "sRGB", "oiio:UnassociatedAlpha": 1,
+             "relray:view_transform": transform, **dict(metadata or {})}
     _write_image(Path(path), codes, names, oiio.UINT8, attrs, alpha_channel=3 if alpha else -1)
 
 
@@ -422,8 +453,10 @@ def write_frame(
     image: FilmImage,
     metadata: Mapping[str, MetadataValue],
     exposure: float = 0.0,
+    view=None,
 ) -> list[Path]:
     """Write the requested formats of one frame; returns their paths in request order.
+    ``view``: the PNG's OCIO display view (None: plain sRGB).
 
     Creates ``out_dir``. Each file is atomic; ``stem.exr`` is written last so that a
     finished EXR (:func:`frame_complete`) implies the frame's other files are finished.
@@ -451,7 +484,8 @@ def write_frame(
         ) from exc
     paths = frame_paths(out_dir, stem)
     writers: dict[str, Callable[[], None]] = {
-        "png": lambda: write_png(paths["png"], image.rgba, exposure, metadata=metadata),
+        "png": lambda: write_png(paths["png"], image.rgba, exposure, metadata=metadata,
+                                 view=view),
         "spectral-exr": lambda: write_spectral_exr(
             paths["spectral-exr"], image.spectral, image.band_centers_nm, metadata, image.rgba
         ),

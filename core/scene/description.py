@@ -69,6 +69,18 @@ class RenderSettings:
 
 
 @dataclass(frozen=True)
+class ViewTransform:
+    """``output.view_transform``: the PNG through an OpenColorIO display view (as
+    Blender's colour management does), instead of the plain sRGB curve. ``config``: an
+    OCIO config file (absolute); ``display``, ``view``, ``look`` as its names."""
+
+    config: Path
+    display: str = "sRGB"
+    view: str = "Standard"
+    look: str = ""
+
+
+@dataclass(frozen=True)
 class OutputSettings:
     """The ``[output]`` table. ``dir`` is absolute. ``exposure``: stops applied to the PNG,
     or :data:`AUTO_EXPOSURE` (metered per frame: :mod:`..output.exposure`)."""
@@ -79,6 +91,7 @@ class OutputSettings:
     spectral_bands: tuple[float, float, float] = (380.0, 780.0, 10.0)
     aovs: tuple[str, ...] = ("depth", "doppler", "lab_time")
     exposure: float | str = 0.0
+    view_transform: ViewTransform | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -79,6 +79,7 @@ from .description import (
     OutputSettings,
     RenderSettings,
     SceneSpec,
+    ViewTransform,
     Worldline,
     frozen,
 )
@@ -104,6 +105,7 @@ from .schema import (  # noqa: F401  (the limits are part of this module's API)
     SENSOR_RANGE_NM,
     given,
 )
+from .view_transform import ocio_problem
 
 # ------------------------------------------------------------- cross-key errors
 
@@ -206,7 +208,23 @@ def _output(o: schema.Output, ctx: _Ctx, job_dir: Path) -> OutputSettings:
                         float(o.spectral_bands[2])),
         aovs=tuple(dict.fromkeys(o.aovs)),
         exposure=o.exposure,
+        view_transform=_view_transform(o, ctx, job_dir),
     )
+
+
+def _view_transform(o: schema.Output, ctx: _Ctx, job_dir: Path) -> ViewTransform | None:
+    """``output.view_transform``: the config must load and name the display, view, look."""
+    v = o.view_transform
+    if v is None:
+        return None
+    sub = ctx.sub("view_transform")
+    path = _resolve_path(v.config, job_dir, sub, "config")
+    check_readable(path, sub.key("config"), ctx.file)
+    problem = ocio_problem(path, v.display, v.view, v.look)
+    if problem is not None:
+        key, why = problem
+        raise sub.error(key, why)
+    return ViewTransform(path, v.display, v.view, v.look)
 
 
 def _nearest_rotation(R: np.ndarray) -> np.ndarray:

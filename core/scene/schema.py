@@ -359,6 +359,19 @@ class Render(Table):
                            "still lights the scene.")
 
 
+class ViewTransformTable(Table):
+    """``output.view_transform``: PNGs through an OpenColorIO display view."""
+
+    needs: ClassVar[str] = "a view transform needs its OCIO config file"
+    config: Annotated[Str, Field(min_length=1)] = Field(
+        description="OpenColorIO config file (relative: to the job file), e.g. the copy "
+                    "of Blender's colormanagement/config.ocio the farm export writes.")
+    display: Str = Field("sRGB", description="A display of the config.")
+    view: Str = Field("Standard", description="A view of that display (Blender: AgX, "
+                                              "Filmic, Standard, ...).")
+    look: Str = Field("", description="A look of the config, or empty.")
+
+
 class Output(Table):
     """``[output]``: where and what is written."""
 
@@ -388,6 +401,9 @@ class Output(Table):
         0.0, description="Stops, applied to PNG only (the EXR stays linear); \"auto\": "
                          "metered per frame (log-average luminance onto 0.18) and smoothed "
                          "over the animation.")
+    view_transform: ViewTransformTable = Field(
+        None, description="PNGs through this OpenColorIO display view instead of the plain "
+                          "sRGB curve (the EXR stays linear).")
 
 
 class Camera(Table):
@@ -1170,6 +1186,7 @@ def markdown() -> str:
         ("[render]", Render, ()), ("[output]", Output, ()), ("[camera]", Camera, ()),
         ("[motion]", Motion, ()), ("motion.keyframes entries", Keyframe, ()),
         ("motion.events entries", CameraEvent, ()),
+        ("output.view_transform", ViewTransformTable, ()),
         ("[scene]", Scene, ()), ("[[materials]]", Material, ()),
         ("materials.emission_spectrum", Spectrum, ()),
         ("[[objects]], every shape", Object, ()),

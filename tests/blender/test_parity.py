@@ -103,3 +103,30 @@ def test_the_noise_threshold_stops_converged_pixels(cornell, engine, tmp_path):
 
     job = tomllib.loads((tmp_path / "farm" / "job.toml").read_text())
     assert job["render"]["noise_threshold"] == pytest.approx(0.2)
+
+
+def test_the_farm_png_goes_through_the_scenes_view_transform(cornell, engine, tmp_path):
+    """With AgX (Blender's default view) and the view's exposure at +2 stops, the farm
+    job's PNG is F12's PNG (the same seed: codes within 2 of 255 on average), where the
+    plain sRGB curve of the job's exposure was not."""
+    scene = cornell
+    scene.view_settings.view_transform = "AgX"
+    scene.view_settings.exposure = 2.0
+    rendering.set_output(scene, tmp_path, "f12_", "PNG")
+    scene.render.image_settings.color_mode = "RGB"
+    rendering.render_still(scene, write=True)
+    f12 = rendering.load_image(tmp_path / "f12_.png")[..., :3]
+    out = tmp_path / "farm"
+    assert bpy.ops.relray.export_farm(directory=str(out)) == {"FINISHED"}
+    import tomllib
+
+    job = tomllib.loads((out / "job.toml").read_text())
+    assert job["output"]["view_transform"]["view"] == "AgX"
+    assert (out / job["output"]["view_transform"]["config"]).is_file()
+    cli = ext_module("core.cli")
+    assert cli.main(["render", str(out / "job.toml"), "--quiet", "--frames", "1-1"]) == 0
+    farm = rendering.load_image(out / "out" / "frame_0001.png")[..., :3]
+    assert np.abs(farm - f12).mean() * 255 < 2.0, np.abs(farm - f12).mean() * 255
+    assert job["output"]["exposure"] == 2.0
+    plain = rendering.srgb_encode(4.0 * engine.RESULTS[1]["rgba"][..., :3])
+    assert np.abs(plain - f12).mean() * 255 > 5.0  # what the farm PNG was before
