@@ -20,6 +20,17 @@ D⁵ and 1/p(λ) film weights, so roulette does not depend on the camera's speed
 
 ``max_depth`` counts path segments: the camera ray is segment 1, a light sample from
 the k-th hit is segment k+1.
+
+Area lights (a job's ``[[lights]]`` of type area, Blender's area lights) are lights, not
+geometry, as in Blender Cycles: their quads (``KernelScene.area_tris``) are in no BVH, so
+no shadow ray or path is ever stopped by one. :func:`shade` intersects every ray with
+them before it looks at the ray's hit, and each front crossed on the way (one-sided, as
+Cycles' area_light_intersect) adds L_e with the MIS weight of an emissive triangle hit;
+the ray goes on unchanged, as Cycles' shade_light continues a path through a light
+(counting it as a transparent bounce; here it costs no segment). Each light crossing is
+thus counted once per ray segment, with the same visibility for next-event estimation
+(whose shadow ray no light blocks) as for BSDF sampling, which keeps the MIS weights
+summing to 1. Scenes without area lights skip the test (``area_tris`` is empty).
 """
 
 from __future__ import annotations
