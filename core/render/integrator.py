@@ -23,14 +23,15 @@ the k-th hit is segment k+1.
 
 Area lights (a job's ``[[lights]]`` of type area, Blender's area lights) are lights, not
 geometry, as in Blender Cycles: their quads (``KernelScene.area_tris``) are in no BVH, so
-no shadow ray or path is ever stopped by one. :func:`shade` intersects every ray with
-them before it looks at the ray's hit, and each front crossed on the way (one-sided, as
-Cycles' area_light_intersect) adds L_e with the MIS weight of an emissive triangle hit;
-the ray goes on unchanged, as Cycles' shade_light continues a path through a light
-(counting it as a transparent bounce; here it costs no segment). Each light crossing is
-thus counted once per ray segment, with the same visibility for next-event estimation
-(whose shadow ray no light blocks) as for BSDF sampling, which keeps the MIS weights
-summing to 1. Scenes without area lights skip the test (``area_tris`` is empty).
+no shadow ray or path is ever stopped by one. :func:`cross_area_lights` intersects every
+ray with them before :func:`shade` looks at the ray's hit, and each front crossed on the
+way (one-sided, as Cycles' area_light_intersect) adds L_e with the MIS weight of an
+emissive triangle hit; the ray goes on unchanged, as Cycles' shade_light continues a
+path through a light (counting it as a transparent bounce; here it costs no segment).
+Each light crossing is thus counted once per ray segment, with the same visibility for
+next-event estimation (whose shadow ray no light blocks) as for BSDF sampling, which
+keeps the MIS weights summing to 1. Scenes without area lights never call it
+(``area_tris`` is empty), so they run the kernels they ran before.
 """
 
 from __future__ import annotations
@@ -168,7 +169,7 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
                  area_tris: np.ndarray | None = None) -> KernelScene:
     """Pack the scene for the kernels (``extent``: the largest BVH's, for the ray offset;
     ``segments``: :meth:`.rest_frames.MovingScene.segment_table`; ``area_tris``: the
-    triangles of area lights, which are in no BVH: :func:`shade`)."""
+    triangles of area lights, which are in no BVH: :func:`cross_area_lights`)."""
     if segments is None:
         segments = (np.zeros((0, 3)), np.zeros(0), np.ones(0), np.zeros(0), np.zeros((0, 3)),
                     np.zeros((0, 3)))
@@ -430,7 +431,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
-     s_beam, s_area_tris) = sc
+     s_beam, _) = sc
     keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu, prev_moving = paths
     idx, o, d, rt = rays
     t_hit, prim, bu, bv, hseg = hits
@@ -442,38 +443,12 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
     dim_roulette = bounce_dim(depth, DIM_ROULETTE)
     n_alive = 0
     n_sh = 0
-    n_area = len(s_area_tris)
     rho_j = np.zeros(4, np.float64)   # ρ(λ_lab) of the hit's material per hero lane
     for i in range(n):
         pi = idx[i]
         key = keys[pi]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         tri = prim[i]
-        # ---- the area lights the ray crosses before its hit (static, lab frame). They
-        # are lights, not geometry (in no BVH: they block nothing, and are nothing from
-        # behind); each front crossed adds its emission, MIS-weighted exactly as an
-        # emissive triangle hit below, and the ray goes on unchanged, as Cycles'
-        # shade_light continues a path through a light. A light within the ray offset
-        # behind the hit (an area light on a ceiling) still counts, as NEE reaches it.
-        if n_area > 0:
-            ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
-            t_max = np.float64(t_hit[i])
-            if tri >= 0:
-                t_max += ray_offset_at(s_eps, ox + t_max * dx, oy + t_max * dy,
-                                       oz + t_max * dz)
-            for q in range(n_area):
-                lt = s_area_tris[q]
-                t_l, cos_l = front_hit(ox, oy, oz, np.float64(dx), np.float64(dy),
-                                       np.float64(dz), triangle_vectors(s_v0, s_e1, s_e2, s_ng,
-                                                                        lt), t_max)
-                if t_l > 0.0:
-                    w = 1.0
-                    if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[lt] > 0.0:
-                        w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
-                            s_tri_pmf[lt], s_area[lt], t_l, cos_l))
-                    er_l = s_mat_emit_row[s_tri_mat[lt]]
-                    for j in range(nlanes):
-                        L[pi, j] += thr[pi, j] * w * lerp(s_emit, er_l, li[pi, j], lf[pi, j])
         # ---- a miss: the sky
         if tri < 0:
             if s_sky_row >= 0 and (depth > 0 or sky_seen):
@@ -671,6 +646,48 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
     return n_alive, n_sh
 
 
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
+def cross_area_lights(sc, paths, rays, hits, n, depth, nlanes):
+    """The area lights each live ray 0 ≤ i < n crosses before its hit (run before
+    :func:`shade` on the same rays and hits; only when the scene has area lights).
+
+    They are lights, not geometry (in no BVH: they block nothing and are nothing from
+    behind, :func:`front_hit`); each front crossed adds its emission, MIS-weighted exactly
+    as :func:`shade` weights an emissive triangle hit, and the ray goes on unchanged, as
+    Cycles' shade_light continues a path through a light. The lights are static: the
+    ray's lab lanes and lab distances apply as they are (a moving body's frame change
+    happens at its hit, beyond them). A light within the ray offset behind the hit (an
+    area light mounted in a ceiling) still counts, as next-event estimation reaches it.
+    """
+    s_v0, s_e1, s_e2, s_ng, s_area = sc.v0, sc.e1, sc.e2, sc.ng, sc.area
+    s_tri_mat, s_emit, s_mat_emit_row = sc.tri_mat, sc.emit, sc.mat_emit_row
+    s_tri_pmf, s_eps, s_area_tris = sc.tri_pmf, sc.eps, sc.area_tris
+    L, thr, li, lf, prev_pdf, prev_delta = (paths.L, paths.thr, paths.li, paths.lf,
+                                            paths.prev_pdf, paths.prev_delta)
+    idx, o, d = rays.idx, rays.o, rays.d
+    t_hit, prim = hits.t, hits.prim
+    n_area = len(s_area_tris)
+    for i in range(n):
+        pi = idx[i]
+        ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
+        dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
+        t_max = np.float64(t_hit[i])
+        if prim[i] >= 0:
+            t_max += ray_offset_at(s_eps, ox + t_max * dx, oy + t_max * dy, oz + t_max * dz)
+        for q in range(n_area):
+            lt = s_area_tris[q]
+            t_l, cos_l = front_hit(ox, oy, oz, dx, dy, dz,
+                                   triangle_vectors(s_v0, s_e1, s_e2, s_ng, lt), t_max)
+            if t_l > 0.0:
+                w = 1.0
+                if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[lt] > 0.0:
+                    w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
+                        s_tri_pmf[lt], s_area[lt], t_l, cos_l))
+                er = s_mat_emit_row[s_tri_mat[lt]]
+                for j in range(nlanes):
+                    L[pi, j] += thr[pi, j] * w * lerp(s_emit, er, li[pi, j], lf[pi, j])
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def add_shadows(sh_idx, blocked, sh_c, L, nlanes):
     """Add the unoccluded next-event contributions to their paths."""
@@ -785,6 +802,7 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     shadows = ShadowRays(b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"], b["sh_t0"])
     column_split(lamu, sc.emit.shape[1], paths.li, paths.lf)
     moving = isinstance(accel, MovingScene)
+    area_lights = len(sc.area_tris) > 0  # else not one more instruction per ray
     static_seg = b["seg"]
     if not moving:
         static_seg[:] = -1
@@ -797,6 +815,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
             hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
         if depth == 0:
             first_t, first_seg = hits.t, hits.seg.copy()
+        if area_lights:
+            cross_area_lights(sc, paths, rays, hits, m, depth, nlanes)
         m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen)
         if ns:
             if moving:
