@@ -715,6 +715,7 @@ def scene_hash(scene, mode: str) -> str:
         for seg in group.segments:
             h.update(np.array([*seg.u, seg.t_ref, *seg.p_ref, seg.t_lo, seg.t_hi]).tobytes())
     h.update(repr(scene.materials).encode())
+    h.update(str(scene.light_triangles).encode())  # which triangles are area lights
     for light in scene.lights:
         h.update(repr(light).encode())
         for a in (light.position, light.direction, light.color):

@@ -39,8 +39,9 @@ light                    sun: W/m²) × 2^exposure, radius, spot size and blend;
                          the blackbody colour when "temperature" is used
 area light               a ``[[lights]]`` area light: position, direction (-Z), up (+Y)
                          and size under the object's transform; the core makes it an
-                         emissive one-sided quad of radiance L = P / (π A); disk and
-                         ellipse become the rectangle of the same area (warned)
+                         emissive one-sided quad of radiance L = P / (π A), a light and
+                         not geometry, as in Cycles (no shadow, clear from behind); disk
+                         and ellipse become the rectangle of the same area (warned)
 world                    Background colour × strength (constant sky), or ``world.color``
 camera                   perspective: world matrix (scale removed), lens and sensor fit →
                          vertical FOV, shift converted to the core's units (the larger

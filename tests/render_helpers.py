@@ -24,6 +24,7 @@ from relray.core.render.camera import PinholeCamera
 from relray.core.render.film import FilmImage
 from relray.core.render.frames import build_renderer
 from relray.core.scene.description import Job
+from relray.core.scene.geometry import Scene
 from relray.core.scene.job import parse_job
 from relray.core.scene.motion import frame_events
 
@@ -88,10 +89,12 @@ def make_job(data: dict[str, Any], tmp_path: Path) -> Job:
     return parse_job(data, Path(tmp_path) / "job.toml")
 
 
-def render(data: dict[str, Any], tmp_path: Path, frame: int | None = None) -> Rendered:
-    """Render one frame of the job dict (the first frame unless ``frame`` is given)."""
+def render(data: dict[str, Any], tmp_path: Path, frame: int | None = None,
+           scene: Scene | None = None) -> Rendered:
+    """Render one frame of the job dict (the first frame unless ``frame`` is given);
+    ``scene``: render this scene instead of the job's (as the Blender add-on does)."""
     job = make_job(data, tmp_path)
-    renderer = build_renderer(job)
+    renderer = build_renderer(job, scene)
     camera = renderer.camera
     events = dict(frame_events(job))
     f = min(events) if frame is None else frame
@@ -170,3 +173,36 @@ def pixel_average(f, width: int, height: int, fov_deg: float, axes, n_sub: int =
     x, y = ndc(cols, rows, width, height, fov_deg)
     v = f(directions(x, y, axes))
     return v.mean(axis=(2, 3)), v.std(axis=(2, 3))
+
+
+# --------------------------------------------------------------------------- analytic values
+
+
+def zscore(value: np.ndarray, expected: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(value - expected)/sigma; ±inf where sigma = 0 and they differ, 0 where equal."""
+    diff = np.asarray(value, float) - expected
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = diff / sigma
+    return np.where(diff == 0.0, 0.0, z)
+
+
+def corner_factor(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """Form factor from a point to a parallel rectangle with one corner straight above.
+
+    Extents X·h, Y·h (signed: the factor is odd in X and in Y), h the height:
+    F = [X/√(1+X²) atan(Y/√(1+X²)) + Y/√(1+Y²) atan(X/√(1+Y²))] / (2π).
+    """
+    sx, sy = np.sqrt(1.0 + X * X), np.sqrt(1.0 + Y * Y)
+    return (X / sx * np.arctan(Y / sx) + Y / sy * np.arctan(X / sy)) / (2.0 * np.pi)
+
+
+def rectangle_form_factor(x, y, h: float, x0: float, x1: float, y0: float,
+                          y1: float) -> np.ndarray:
+    """Form factor from points (x, y) of a plane to the rectangle [x0, x1] × [y0, y1] of a
+    parallel plane at distance h facing it (corner decomposition with signs): a
+    Lambertian surface of albedo ρ under a one-sided emitter of radiance L_e there has
+    radiance ρ L_e F."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    return (corner_factor((x1 - x) / h, (y1 - y) / h) - corner_factor((x0 - x) / h, (y1 - y) / h)
+            - corner_factor((x1 - x) / h, (y0 - y) / h)
+            + corner_factor((x0 - x) / h, (y0 - y) / h))

@@ -76,7 +76,9 @@ from render_helpers import (
     ndc,
     pixel_average,
     pixel_to_pixelcoords,
+    rectangle_form_factor,
     render,
+    zscore,
 )
 
 from relray.core.physics import spectrum
@@ -124,14 +126,6 @@ def pixel_range(f, col: int, row: int, width: int, height: int, fov: float, axes
     x, y = ndc(cc, rr, width, height, fov)
     v = f(directions(x, y, axes))
     return float(v.min()), float(v.max())
-
-
-def zscore(value: np.ndarray, expected: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """(value - expected)/sigma; ±inf where sigma = 0 and they differ, 0 where equal."""
-    diff = np.asarray(value, float) - expected
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = diff / sigma
-    return np.where(diff == 0.0, 0.0, z)
 
 
 def angle_deg(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -842,16 +836,6 @@ def test_white_furnace(tmp_path, beta, ct):
     assert np.all(np.abs(rgb.mean(axis=0) - 1.0) <= 5.0 * sig_rgb), rgb.mean(axis=0)
 
 
-def _corner_factor(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """Form factor from a floor point to a parallel rectangle with one corner straight above.
-
-    Extents X·h, Y·h (signed: the factor is odd in X and in Y), h the height:
-    F = [X/√(1+X²) atan(Y/√(1+X²)) + Y/√(1+Y²) atan(X/√(1+Y²))] / (2π).
-    """
-    sx, sy = np.sqrt(1.0 + X * X), np.sqrt(1.0 + Y * Y)
-    return (X / sx * np.arctan(Y / sx) + Y / sy * np.arctan(X / sy)) / (2.0 * np.pi)
-
-
 LIGHT_H = 1.5
 LIGHT_A = 0.6  # half side of the square area light
 RHO = 0.5
@@ -869,10 +853,7 @@ def floor_radiance(P: np.ndarray, kind: str) -> np.ndarray:
     x, y = P[..., 0], P[..., 1]
     if kind == "area":
         h, a = LIGHT_H, LIGHT_A
-        F = (_corner_factor((a - x) / h, (a - y) / h) - _corner_factor((-a - x) / h, (a - y) / h)
-             - _corner_factor((a - x) / h, (-a - y) / h)
-             + _corner_factor((-a - x) / h, (-a - y) / h))
-        return RHO * 3.0 * F
+        return RHO * 3.0 * rectangle_form_factor(x, y, h, -a, a, -a, a)
     if kind == "point":
         r2 = x * x + y * y + LIGHT_H**2
         return RHO / np.pi * 50.0 / (4.0 * np.pi) * (LIGHT_H / np.sqrt(r2)) / r2

@@ -267,6 +267,24 @@ def test_area_light_becomes_emissive_quad(tmp_path: Path) -> None:
     np.testing.assert_allclose(extent, [0.5, 0.4, 0.0], atol=1e-6)  # width along x
 
 
+@pytest.mark.parametrize("moving", [False, True], ids=["static", "moving-scene"])
+def test_area_light_quads_are_the_last_static_triangles(tmp_path: Path, moving: bool) -> None:
+    """The quads are lights, not geometry: ``light_triangles`` counts them and they are
+    triangles[n_geometry:n_static], after the static objects and before any moving group
+    (so the static BVH is triangles[:n_geometry] and the groups keep their places)."""
+    moving_sphere = ('[[objects]]\nshape = "sphere"\ncenter = [3, 0, 0]\nradius = 0.5\n'
+                     'material = "m"\nvelocity = [0.5, 0, 0]\n') if moving else ""
+    s = build(tmp_path, moving_sphere + AREA)
+    assert s.light_triangles == 2
+    assert s.n_geometry == s.n_static - 2 == 12  # the box's 12 triangles
+    lamp = [m.name for m in s.materials].index("area_light:panel")
+    assert np.flatnonzero(s.material_ids == lamp).tolist() == [12, 13]
+    assert (s.tri_group is not None) == moving
+    if moving:
+        assert s.tri_group[:14].tolist() == [0] * 14 and np.all(s.tri_group[14:] == 1)
+    assert build(tmp_path, AREA.split("[[lights]]")[0]).light_triangles == 0
+
+
 def test_area_light_emits_its_power() -> None:
     """P = pi A L for a one-sided Lambertian emitter, for any direction."""
     light = job.LightSpec(type="area", position=np.zeros(3),

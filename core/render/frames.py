@@ -83,10 +83,17 @@ def _bounding_radius(triangles: np.ndarray, origin: np.ndarray) -> float:
 
 def prepare(scene: Scene, mode: str) -> PreparedScene:
     """Build the BVHs (the static scene's and one per velocity group), the spectral tables
-    and the light table of ``scene``."""
+    and the light table of ``scene``.
+
+    The area lights' quads (``scene.light_triangles``, the last static triangles) are in
+    no BVH: they are lights, not geometry (as in Cycles), so they block no ray; the kernel
+    finds the rays crossing their front itself (``KernelScene.area_tris``, empty when the
+    scene has none: then nothing changes). Their triangles stay in the kernel's tables
+    (the light table samples them) and inside ``radius``."""
     n_static = scene.n_static
+    n_geometry = scene.n_geometry
     tris = scene.triangles
-    accel = Accel(tris[:n_static]) if n_static else None
+    accel = Accel(tris[:n_geometry]) if n_geometry else None
     if accel is not None:
         origin = accel.origin
     else:
@@ -115,8 +122,12 @@ def prepare(scene: Scene, mode: str) -> PreparedScene:
         tracer = MovingScene(accel, groups, origin)
         segments = tracer.segment_table()
         radius = math.inf
+    elif accel is None:  # nothing but area lights: every ray escapes (no BVH, no group)
+        tracer = MovingScene(None, [], origin)
+    emits = tables.mat_emit_row[scene.material_ids[n_geometry:n_static]] >= 0
+    area_tris = np.arange(n_geometry, n_static, dtype=np.int32)[emits]
     kscene = kernel_scene(extent, scene.normals, scene.material_ids, tables, lights, geom,
-                          segments)
+                          segments, area_tris)
     return PreparedScene(scene, accel, tables, lights, kscene, radius, mode, tracer, origin)
 
 

@@ -20,6 +20,18 @@ D⁵ and 1/p(λ) film weights, so roulette does not depend on the camera's speed
 
 ``max_depth`` counts path segments: the camera ray is segment 1, a light sample from
 the k-th hit is segment k+1.
+
+Area lights (a job's ``[[lights]]`` of type area, Blender's area lights) are lights, not
+geometry, as in Blender Cycles: their quads (``KernelScene.area_tris``) are in no BVH, so
+no shadow ray or path is ever stopped by one. :func:`cross_area_lights` intersects every
+ray with them before :func:`shade` looks at the ray's hit, and each front crossed on the
+way (one-sided, as Cycles' area_light_intersect) adds L_e with the MIS weight of an
+emissive triangle hit; the ray goes on unchanged, as Cycles' shade_light continues a
+path through a light (counting it as a transparent bounce; here it costs no segment).
+Each light crossing is thus counted once per ray segment, with the same visibility for
+next-event estimation (whose shadow ray no light blocks) as for BSDF sampling, which
+keeps the MIS weights summing to 1. Scenes without area lights never call it
+(``area_tris`` is empty), so they run the kernels they ran before.
 """
 
 from __future__ import annotations
@@ -111,6 +123,7 @@ class KernelScene(NamedTuple):
     l_seg: np.ndarray     # int32 (K,): a moving triangle light's segment, else -1
     shift: bool         # bodies shift wavelengths (``doppler``, not rgb)
     beam: bool          # bodies apply D⁵ (``searchlight``)
+    area_tris: np.ndarray  # int32 (A,): the area lights' triangles (in no BVH), often none
 
 
 class Paths(NamedTuple):
@@ -152,10 +165,11 @@ class ShadowRays(NamedTuple):
 def kernel_scene(extent: float, normals: np.ndarray | None,
                  material_ids: np.ndarray, tables: SpectralTables, lights: LightTable,
                  geometry: dict[str, np.ndarray],
-                 segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-                 ) -> KernelScene:
+                 segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                 area_tris: np.ndarray | None = None) -> KernelScene:
     """Pack the scene for the kernels (``extent``: the largest BVH's, for the ray offset;
-    ``segments``: :meth:`.rest_frames.MovingScene.segment_table`)."""
+    ``segments``: :meth:`.rest_frames.MovingScene.segment_table`; ``area_tris``: the
+    triangles of area lights, which are in no BVH: :func:`cross_area_lights`)."""
     if segments is None:
         segments = (np.zeros((0, 3)), np.zeros(0), np.ones(0), np.zeros(0), np.zeros((0, 3)),
                     np.zeros((0, 3)))
@@ -170,7 +184,9 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
         tables.mat_weights, tables.mat_alpha, tables.mat_ior, tables.mat_emit_row,
         tables.mat_one_sided, lights.kind, lights.prim, lights.pos, lights.dir, lights.row,
         lights.scale, lights.spot, lights.cdf, lights.tri_pmf, float(lights.sky_pmf),
-        int(lights.sky_row), ray_offset(extent), *segments, l_seg, False, False)
+        int(lights.sky_row), ray_offset(extent), *segments, l_seg, False, False,
+        np.zeros(0, np.int32) if area_tris is None else np.ascontiguousarray(area_tris,
+                                                                             np.int32))
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
@@ -223,6 +239,42 @@ def surface_point(v0, e1, e2, ng, tri, b1, b2):
              v0[tri, 1] + b1 * e1[tri, 1] + b2 * e2[tri, 1],
              v0[tri, 2] + b1 * e1[tri, 2] + b2 * e2[tri, 2]),
             (ng[tri, 0], ng[tri, 1], ng[tri, 2]))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def triangle_vectors(v0, e1, e2, ng, tri):
+    """v0, e1, e2 and the unit geometric normal of triangle ``tri``."""
+    return ((v0[tri, 0], v0[tri, 1], v0[tri, 2]), (e1[tri, 0], e1[tri, 1], e1[tri, 2]),
+            (e2[tri, 0], e2[tri, 1], e2[tri, 2]), (ng[tri, 0], ng[tri, 1], ng[tri, 2]))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def front_hit(ox, oy, oz, dx, dy, dz, tv, t_max):
+    """Where the ray o + t d crosses the front (the side its normal faces) of the
+    triangle ``tv`` (:func:`triangle_vectors`) at 0 < t < ``t_max`` (Möller–Trumbore, in
+    float64): (t, cos θ = -d·n > 0); (-1, 0) when it does not: seen from behind (as a
+    Cycles area light, area_light_intersect: one-sided), parallel, outside or beyond."""
+    v0, e1, e2, n = tv
+    cos_l = -(n[0] * dx + n[1] * dy + n[2] * dz)
+    if cos_l <= 0.0:
+        return -1.0, 0.0
+    px, py, pz = dy * e2[2] - dz * e2[1], dz * e2[0] - dx * e2[2], dx * e2[1] - dy * e2[0]
+    det = e1[0] * px + e1[1] * py + e1[2] * pz
+    if det == 0.0:
+        return -1.0, 0.0
+    inv = 1.0 / det
+    sx, sy, sz = ox - v0[0], oy - v0[1], oz - v0[2]
+    u = (sx * px + sy * py + sz * pz) * inv
+    if u < 0.0 or u > 1.0:
+        return -1.0, 0.0
+    qx, qy, qz = sy * e1[2] - sz * e1[1], sz * e1[0] - sx * e1[2], sx * e1[1] - sy * e1[0]
+    v = (dx * qx + dy * qy + dz * qz) * inv
+    if v < 0.0 or u + v > 1.0:
+        return -1.0, 0.0
+    t = (e2[0] * qx + e2[1] * qy + e2[2] * qz) * inv
+    if t <= 0.0 or t >= t_max:
+        return -1.0, 0.0
+    return t, cos_l
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -379,7 +431,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
-     s_beam) = sc
+     s_beam, _) = sc
     keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu, prev_moving = paths
     idx, o, d, rt = rays
     t_hit, prim, bu, bv, hseg = hits
@@ -594,6 +646,48 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
     return n_alive, n_sh
 
 
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
+def cross_area_lights(sc, paths, rays, hits, n, depth, nlanes):
+    """The area lights each live ray 0 ≤ i < n crosses before its hit (run before
+    :func:`shade` on the same rays and hits; only when the scene has area lights).
+
+    They are lights, not geometry (in no BVH: they block nothing and are nothing from
+    behind, :func:`front_hit`); each front crossed adds its emission, MIS-weighted exactly
+    as :func:`shade` weights an emissive triangle hit, and the ray goes on unchanged, as
+    Cycles' shade_light continues a path through a light. The lights are static: the
+    ray's lab lanes and lab distances apply as they are (a moving body's frame change
+    happens at its hit, beyond them). A light within the ray offset behind the hit (an
+    area light mounted in a ceiling) still counts, as next-event estimation reaches it.
+    """
+    s_v0, s_e1, s_e2, s_ng, s_area = sc.v0, sc.e1, sc.e2, sc.ng, sc.area
+    s_tri_mat, s_emit, s_mat_emit_row = sc.tri_mat, sc.emit, sc.mat_emit_row
+    s_tri_pmf, s_eps, s_area_tris = sc.tri_pmf, sc.eps, sc.area_tris
+    L, thr, li, lf, prev_pdf, prev_delta = (paths.L, paths.thr, paths.li, paths.lf,
+                                            paths.prev_pdf, paths.prev_delta)
+    idx, o, d = rays.idx, rays.o, rays.d
+    t_hit, prim = hits.t, hits.prim
+    n_area = len(s_area_tris)
+    for i in range(n):
+        pi = idx[i]
+        ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
+        dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
+        t_max = np.float64(t_hit[i])
+        if prim[i] >= 0:
+            t_max += ray_offset_at(s_eps, ox + t_max * dx, oy + t_max * dy, oz + t_max * dz)
+        for q in range(n_area):
+            lt = s_area_tris[q]
+            t_l, cos_l = front_hit(ox, oy, oz, dx, dy, dz,
+                                   triangle_vectors(s_v0, s_e1, s_e2, s_ng, lt), t_max)
+            if t_l > 0.0:
+                w = 1.0
+                if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[lt] > 0.0:
+                    w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
+                        s_tri_pmf[lt], s_area[lt], t_l, cos_l))
+                er = s_mat_emit_row[s_tri_mat[lt]]
+                for j in range(nlanes):
+                    L[pi, j] += thr[pi, j] * w * lerp(s_emit, er, li[pi, j], lf[pi, j])
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def add_shadows(sh_idx, blocked, sh_c, L, nlanes):
     """Add the unoccluded next-event contributions to their paths."""
@@ -708,6 +802,7 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     shadows = ShadowRays(b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"], b["sh_t0"])
     column_split(lamu, sc.emit.shape[1], paths.li, paths.lf)
     moving = isinstance(accel, MovingScene)
+    area_lights = len(sc.area_tris) > 0  # else not one more instruction per ray
     static_seg = b["seg"]
     if not moving:
         static_seg[:] = -1
@@ -720,6 +815,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
             hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
         if depth == 0:
             first_t, first_seg = hits.t, hits.seg.copy()
+        if area_lights:
+            cross_area_lights(sc, paths, rays, hits, m, depth, nlanes)
         m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen)
         if ns:
             if moving:

@@ -9,7 +9,10 @@
    tessellated by :mod:`relray.core.shapes`, meshes are read from their file
    (.ply/.obj/.stl through trimesh, .glb/.gltf through :mod:`relray.core.gltf`);
 3. the job's ``[[lights]]``: point, spot and sun lights are passed on; each **area
-   light becomes an emissive quad** with its own material.
+   light becomes an emissive quad** with its own material. The quad is a *light*, not
+   geometry (as in Blender Cycles): it is in no BVH, so it casts no shadow and is
+   transparent from behind; rays crossing its front add its emission and go on
+   (``Scene.light_triangles``; :mod:`relray.core.render.integrator`).
 
 Steps 3 and after (area lights, degenerate triangles, normals, the resolution warning)
 are :func:`scene_from_parts`, public for callers that bring their own triangle arrays
@@ -25,6 +28,9 @@ material                      black (``base_color`` 0), ``emission`` = light ``c
                               ``one_sided_emission`` = true
 ``emission_strength``         L = P / (π · A), as Blender/Cycles: a Lambertian emitter of
                               area A and radiance L emits P = π · A · L from its front
+place                         the last triangles of the static ones (after the given static
+                              triangles, before any moving group), counted in
+                              ``Scene.light_triangles``: lights, not geometry
 ============================  ===============================================================
 
 **Precision.** Vertex positions stay float64 in the lab frame. The accelerator
@@ -103,12 +109,21 @@ class Scene:
     # coordinates; None when nothing moves
     tri_group: np.ndarray | None = None
     groups: tuple[VelocityGroup, ...] = ()
+    # the area lights' quads: the last ``light_triangles`` of the static triangles,
+    # triangles[n_geometry:n_static]; lights, not geometry (no BVH: no shadow, no back)
+    light_triangles: int = 0
 
     @property
     def n_static(self) -> int:
         """The static triangles come first: triangles[:n_static]."""
         return len(self.triangles) if self.tri_group is None else int(
             np.count_nonzero(self.tri_group == 0))
+
+    @property
+    def n_geometry(self) -> int:
+        """The static triangles that are geometry (in the BVH): triangles[:n_geometry];
+        the area lights' quads follow them (``light_triangles``)."""
+        return self.n_static - self.light_triangles
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned (min, max) corners, float64 (3,) each; zeros for an empty scene."""
@@ -351,7 +366,8 @@ def scene_from_parts(
     None; ``material_ids`` (T,) (or one id for all) index ``materials``; ``lights`` may
     hold area lights. In order: every area light becomes an emissive quad (appended
     after the triangles, its material after ``materials``; the scene keeps the point,
-    spot and sun lights), degenerate triangles are dropped (counted in
+    spot and sun lights; the quads stay the last static triangles, counted in
+    ``Scene.light_triangles``: lights, not geometry), degenerate triangles are dropped (counted in
     ``Scene.dropped_degenerate``, one warning), shading normals are made unit length,
     and triangles below the ray offset are counted (one warning). No triangle left is a
     UserError (key ``scene``, naming ``file``), and so is a part of ``named_parts``
@@ -368,6 +384,7 @@ def scene_from_parts(
     parts = [_Part(tris, None if normals is None else
                    np.asarray(normals, dtype=np.float64).reshape(-1, 3, 3), ids)]
     materials, kept_lights = list(materials), []
+    n_given = len(tris)
     for i, light in enumerate(lights):
         if light.type != "area":
             kept_lights.append(light)
@@ -378,6 +395,9 @@ def scene_from_parts(
 
     triangles, normals, material_ids = _concatenate(parts)
     triangles, normals, material_ids, keep = _drop_degenerate(triangles, normals, material_ids)
+    # the quads (static) follow the given triangles: after the stable sort by group they
+    # are still the last static ones
+    light_triangles = int(np.count_nonzero(keep[n_given:]))
     if groups:
         tri_group = np.concatenate([np.asarray(tri_group, np.int32),
                                     np.zeros(len(keep) - len(tri_group), np.int32)])[keep]
@@ -414,6 +434,7 @@ def scene_from_parts(
         unresolved=unresolved,
         tri_group=np.ascontiguousarray(tri_group, np.int32) if groups else None,
         groups=tuple(groups),
+        light_triangles=light_triangles,
     )
 
 

@@ -679,7 +679,10 @@ class SunLight(Light):
 
 
 class AreaLight(Light):
-    """A rectangular area light."""
+    """A one-sided rectangular area light; a light, not an object: no shadow, clear from behind.
+
+    As in Blender Cycles: from the front its radiance is P/(π·A), for camera and bounce
+    rays alike, and what lies behind it shows through (its light is added)."""
 
     what: ClassVar[str] = "for an area light"
     type: Literal["area"]

@@ -30,8 +30,10 @@ def test_meshes_modifiers_and_instances(cornell):
     n_block = len(block_mesh.loop_triangles)
     block.to_mesh_clear()
     assert n_block > 12  # the Bevel modifier is applied
-    # 5 walls (2 each), two instances of the block, the area light's quad.
+    # 5 walls (2 each), two instances of the block, the area light's quad (a light, not
+    # geometry: the last two triangles, in no BVH).
     assert len(ex.scene.triangles) == 10 + 2 * n_block + 2
+    assert ex.scene.light_triangles == 2 and ex.scene.n_geometry == 10 + 2 * n_block
     assert ex.scene.triangles.dtype == np.float64 and ex.scene.normals.shape[1:] == (3, 3)
     white = [i for i, m in enumerate(ex.scene.materials) if m.name == "white"][0]
     tris = ex.scene.triangles[ex.scene.material_ids == white].reshape(-1, 3)
