@@ -7,7 +7,8 @@ PIP    := $(BIN)/python -m pip --disable-pip-version-check
 UV     := uv==0.13.9
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 
-.PHONY: venv lock demo test lint stress bench bench-quick clean gallery extension test-blender
+.PHONY: venv lock demo test lint stress bench bench-quick clean gallery extension test-blender \
+	blender-pictures
 
 ## the venv: exactly the versions (and file hashes) of requirements.lock, then relray
 ## itself as an editable install without dependencies
@@ -49,6 +50,14 @@ test: $(STAMP)
 ## ~/.cache/relray; needs root; about 3 minutes and 2.5 GB the first time)
 test-blender: $(STAMP)
 	tests/blender/real_blender.sh all
+
+## make blender-pictures: the README's pictures of the Relativity panels, captured from an
+## interactive Blender on a virtual display in the same chroot (docs/blender/)
+blender-pictures: $(STAMP)
+	tests/blender/real_blender.sh all -k relativity_panels
+	mkdir -p docs/blender
+	cp $${RELRAY_CACHE:-$$HOME/.cache/relray}/trixie-blender/tmp/relray-pictures/panel_*.png docs/blender/
+	@echo "pictures in docs/blender/"
 
 ## make extension: the Blender extension zips in dist/ (linux-x64, macos-arm64,
 ## windows-x64, each with its platform's wheels of the core's dependencies), built and

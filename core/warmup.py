@@ -17,6 +17,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from .render.frames import build_renderer
+from .scene.job import parse_job
+from .scene.motion import frame_events
+
 #: The frame the warm-up renders (job-format.md): small, but through every kernel.
 WARMUP_JOB: dict[str, Any] = {
     "render": {"width": 8, "height": 8, "spp": 2, "max_depth": 3, "threads": 1},
@@ -50,10 +54,6 @@ def warmup_jobs() -> list[dict[str, Any]]:
 
 def warm() -> float:
     """Render a frame of each of :func:`warmup_jobs` in memory; returns the seconds."""
-    from .render.frames import build_renderer
-    from .scene.job import parse_job
-    from .scene.motion import frame_events
-
     t0 = time.perf_counter()
     for data in warmup_jobs():
         job = parse_job(data, Path("warmup.toml"))

@@ -122,10 +122,7 @@ class RELRAY_PT_camera_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 -
             layout.label(text=f"ct' this frame: {s.ct + frame * s.ct_per_frame:.4g}")
         else:
             layout.prop(s, "ct")
-        col = layout.column(heading="Light")
-        col.prop(rs, "doppler")
-        col.prop(rs, "searchlight")
-        layout.prop(rs, "spectral")
+        draw_light_settings(layout, rs)
         col = layout.column()
         col.enabled = False
         col.prop(s, "gamma")
@@ -146,7 +143,11 @@ def draw_animation_source(layout, context) -> None:
     layout.prop(scene.relray, "speed_of_light")
     layout.label(text=clock_readout(scene), icon="TIME")
     layout.label(text="β at each frame: the animated location's velocity / c", icon="INFO")
-    rs = scene.relray
+    draw_light_settings(layout, scene.relray)
+
+
+def draw_light_settings(layout, rs) -> None:
+    """Doppler Shift, Searchlight and the Spectral Model (the scene's)."""
     col = layout.column(heading="Light")
     col.prop(rs, "doppler")
     col.prop(rs, "searchlight")

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import OpenImageIO as oiio  # noqa: N813
+
 
 def ocio_problem(config: Path, display: str, view: str, look: str) -> tuple[str, str] | None:
     """None when ``config`` loads and names ``display``, its ``view`` and ``look``; else
     (the key at fault, why)."""
-    import OpenImageIO as oiio  # noqa: N813
-
     cc = oiio.ColorConfig(str(config))
     error = cc.geterror() if hasattr(cc, "geterror") else ""
     if error or cc.getNumColorSpaces() == 0:

@@ -102,9 +102,36 @@ debian_mirror() {
     echo "${m:-http://deb.debian.org/debian}"
 }
 
+# A virtual display for the interactive-Blender tests (test_viewport_draw.py): Xvfb,
+# Mesa's software OpenGL (llvmpipe, OpenGL 4.5) and xwd to capture the screen. Added to
+# a cached chroot with apt-get (seconds) instead of rebuilding it.
+DISPLAY_PACKAGES="xvfb xauth x11-apps libgl1-mesa-dri libglx-mesa0 libegl-mesa0"
+
+chroot_apt_install() {  # chroot_apt_install DIR LOG PACKAGES...: apt-get in the chroot
+    local dir="$1" log="$2"
+    shift 2
+    cp /etc/resolv.conf "$dir/etc/resolv.conf"
+    mount_proc "$dir"
+    chroot "$dir" /usr/bin/env DEBIAN_FRONTEND=noninteractive \
+        sh -c "apt-get update -q && apt-get install -y -q --no-install-recommends $*" \
+        >"$log" 2>&1 || die "apt-get install of '$*' in the chroot failed (log: $log)"
+}
+
+ensure_display_packages() {
+    local stamp="$ROOT/.relray-display"
+    if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$DISPLAY_PACKAGES" ]; then
+        return
+    fi
+    say "installing the virtual display into the chroot: $DISPLAY_PACKAGES"
+    # shellcheck disable=SC2086
+    chroot_apt_install "$ROOT" "$CACHE/chroot-display-apt.log" $DISPLAY_PACKAGES
+    echo "$DISPLAY_PACKAGES" >"$stamp"
+}
+
 build_chroot() {
     if [ -f "$ROOT/.relray-chroot" ] && [ "$(cat "$ROOT/.relray-chroot")" = "$CHROOT_RECIPE" ]; then
         say "chroot cached at $ROOT"
+        ensure_display_packages
         return
     fi
     local tmp="$ROOT.tmp" mirror
@@ -121,13 +148,8 @@ build_chroot() {
     mkdir -p "$CACHE"
     debootstrap --variant=minbase "$SUITE" "$tmp" "$mirror" >"$CACHE/debootstrap.log" 2>&1 \
         || die "debootstrap $SUITE from $mirror failed (log: $CACHE/debootstrap.log)"
-    cp /etc/resolv.conf "$tmp/etc/resolv.conf"
-    mount_proc "$tmp"
     # shellcheck disable=SC2086
-    chroot "$tmp" /usr/bin/env DEBIAN_FRONTEND=noninteractive \
-        sh -c "apt-get update -q && apt-get install -y -q --no-install-recommends $APT_PACKAGES" \
-        >"$CACHE/chroot-apt.log" 2>&1 \
-        || die "apt-get install of '$APT_PACKAGES' in the chroot failed (log: $CACHE/chroot-apt.log)"
+    chroot_apt_install "$tmp" "$CACHE/chroot-apt.log" $APT_PACKAGES
     umount "$tmp/proc"
     MOUNTS=()
     if [ -d "$ROOT" ]; then
@@ -136,6 +158,7 @@ build_chroot() {
     fi
     mv "$tmp" "$ROOT"
     echo "$CHROOT_RECIPE" >"$ROOT/.relray-chroot"
+    ensure_display_packages
     say "chroot ready: $(chroot "$ROOT" blender --version 2>/dev/null | head -1)"
 }
 
@@ -203,6 +226,7 @@ EOF_EXPR
         RELRAY_BLENDER_HOST=blender \
         RELRAY_TEST_ZIP=/opt/relray-test/relray-test.zip \
         RELRAY_PYTEST_ARGS="${*:-}" \
+        RELRAY_PICTURES_DIR=/tmp/relray-pictures \
         BLENDER_USER_RESOURCES=/tmp/relray-blender-user \
         NUMBA_CACHE_DIR=/root/.cache/relray-numba \
         OPENBLAS_NUM_THREADS=1 \
