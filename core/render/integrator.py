@@ -45,8 +45,9 @@ looks for its first vertex whose non-specular lobes weigh more than a quarter,
 and writes there albedo = T · w_ns · base_color (linear Rec.709, the material's base
 colour as given: no spectrum, no Doppler, no Fresnel; an emitter's too, its emission
 ignored, as Cycles ignores emission closures) and normal = its shading normal (turned
-towards the ray, unit, in the lab frame: on a moving body the rest-frame normal n of
-the contracted surface is n + (γ - 1)(n·û)û, normalised).  Through a vertex that is
+towards the ray, unit, in the lab frame: on a moving body, whose rest-frame shading
+normal is n, the normal of the surface the lab sees contracted along the body's velocity
+direction û, n + (γ - 1)(n·û)û normalised: :func:`lab_normal`).  Through a vertex that is
 mostly specular (a mirror, smooth metal, glass) the path goes on with
 T ← T · (w_m,specular · base_color + w_g) (T = 1 at the camera), as Cycles multiplies by
 the specular closures' albedo: the features then show what the mirror or the glass
