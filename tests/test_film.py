@@ -7,7 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from relray.core.render.film import REL_ERROR_UNKNOWN, Film, band_centers, window_mean
+from relray.core.render.film import (
+    REL_ERROR_UNKNOWN,
+    Film,
+    band_centers,
+    clamp_samples,
+    window_mean,
+)
 
 AOVS = ("depth", "doppler", "lab_time")
 
@@ -265,6 +271,99 @@ def test_input_validation():
     f.add_samples(np.array([0]), **ok, **lam)
     f.add_samples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), {"depth": np.zeros(0)})
     assert f.total_samples == 1
+
+
+def test_vector_aovs_are_three_columns_each_and_resolve_to_h_w_3():
+    """``albedo`` and ``normal`` take (N, 3) per sample, three sum columns each, and
+    resolve to (h, w, 3) per-pixel means, next to the scalar AOVs; merge adds them."""
+    f = Film(2, 1, aovs=("depth", "albedo", "normal"))
+    assert f.sum_aov.shape == (2, 7)
+    assert f.aov_columns == {"depth": (0, 1), "albedo": (1, 3), "normal": (4, 3)}
+    pixel = np.array([0, 0, 1])
+    albedo = np.array([[0.25, 0.5, 1.0], [0.75, 0.5, 0.0], [0.125, 0.0, 0.5]])
+    normal = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    f.add_samples(pixel, np.ones((3, 3)), np.ones(3),
+                  {"depth": np.array([1.0, 3.0, 2.0]), "albedo": albedo, "normal": normal})
+    img = f.resolve(np.eye(3))
+    assert img.aovs["depth"].shape == (1, 2) and img.aovs["albedo"].shape == (1, 2, 3)
+    np.testing.assert_array_equal(img.aovs["depth"], [[2.0, 2.0]])
+    np.testing.assert_array_equal(img.aovs["albedo"][0, 0], [0.5, 0.5, 0.5])
+    np.testing.assert_array_equal(img.aovs["albedo"][0, 1], albedo[2])
+    # the mean normal is not renormalised (Cycles, OIDN: averaged over the samples)
+    np.testing.assert_array_equal(img.aovs["normal"][0, 0], [0.5, -0.5, 0.0])
+    np.testing.assert_array_equal(img.aovs["normal"][0, 1], [0.0, 0.0, 0.0])
+    other = Film(2, 1, aovs=("depth", "albedo", "normal"))
+    other.add_samples(np.array([1]), np.ones((1, 3)), np.ones(1),
+                      {"depth": np.array([4.0]), "albedo": np.array([[0.875, 1.0, 0.5]]),
+                       "normal": np.array([[0.0, 0.0, 1.0]])})
+    f.merge(other)
+    img = f.resolve(np.eye(3))
+    np.testing.assert_array_equal(img.aovs["albedo"][0, 1], [0.5, 0.5, 0.5])
+    np.testing.assert_array_equal(img.aovs["normal"][0, 1], [0.0, 0.0, 0.5])
+    # a scalar where a vector is due (and the reverse) is refused
+    with pytest.raises(ValueError, match="albedo"):
+        f.add_samples(np.array([0]), np.ones((1, 3)), np.ones(1),
+                      {"depth": np.ones(1), "albedo": np.ones(1), "normal": np.ones((1, 3))})
+    with pytest.raises(ValueError, match="depth"):
+        f.add_samples(np.array([0]), np.ones((1, 3)), np.ones(1), {
+            "depth": np.ones((1, 3)), "albedo": np.ones((1, 3)), "normal": np.ones((1, 3))})
+
+
+def test_a_non_finite_normal_drops_the_whole_sample():
+    f = Film(1, 1, aovs=("normal",))
+    f.add_samples(np.array([0, 0]), np.ones((2, 3)), np.ones(2),
+                  {"normal": np.array([[0.0, np.nan, 0.0], [0.0, 1.0, 0.0]])})
+    assert f.nonfinite_samples == 1 and f.total_samples == 1
+    np.testing.assert_array_equal(f.resolve(np.eye(3)).aovs["normal"][0, 0], [0, 1, 0])
+
+
+# ----------------------------------------------------------------------------- clamp
+M_XYZ_TO_REC709 = np.array([[3.2404542, -1.5371385, -0.4985314],
+                            [-0.9692660, 1.8760108, 0.0415560],
+                            [0.0556434, -0.2040259, 1.0572252]])
+
+
+def test_clamp_bounds_the_largest_rgb_component_and_keeps_the_colour():
+    rng = np.random.default_rng(5)
+    s = np.abs(rng.standard_normal((4000, 3))) * rng.choice([0.1, 1.0, 1e3], (4000, 1))
+    s[7] = [np.inf, 1.0, 1.0]  # non-finite samples are left for the film to drop
+    s[8] = [np.nan, 1.0, 1.0]
+    lanes = rng.random((4000, 4))
+    before, lanes_before = s.copy(), lanes.copy()
+    limit = 5.0
+    n = clamp_samples(s, M_XYZ_TO_REC709, limit, lanes)
+    rgb_before = before @ M_XYZ_TO_REC709.T
+    big = np.abs(rgb_before).max(axis=1)
+    over = big > limit
+    assert n == int(over.sum()) and 100 < n < 3000
+    rgb = s @ M_XYZ_TO_REC709.T
+    finite = np.isfinite(big)
+    assert np.abs(rgb[finite]).max() <= limit * (1 + 1e-12)
+    # samples over the limit end up exactly on it, scaled by one factor k = limit / max
+    np.testing.assert_allclose(np.abs(rgb[over & finite]).max(axis=1), limit, rtol=1e-12)
+    k = limit / big[over & finite]
+    np.testing.assert_allclose(s[over & finite], before[over & finite] * k[:, None], rtol=1e-12)
+    np.testing.assert_allclose(lanes[over & finite], lanes_before[over & finite] * k[:, None],
+                               rtol=1e-12)
+    # the others are untouched, bit for bit (the NaN row too)
+    np.testing.assert_array_equal(s[~over], before[~over])
+    np.testing.assert_array_equal(lanes[~over], lanes_before[~over])
+    assert np.isnan(s[8, 0]) and not np.isfinite(s[7]).all()
+    # without band weights; a clamp of 0 is "off" and not a limit
+    t = before[:100].copy()
+    clamp_samples(t, np.eye(3), 1.0)
+    assert np.abs(t[np.isfinite(t).all(1)]).max() <= 1.0
+    with pytest.raises(ValueError):
+        clamp_samples(before.copy(), np.eye(3), 0.0)
+
+
+def test_clamp_uses_absolute_values_of_negative_rgb():
+    """A saturated spectral sample can have a negative Rec.709 channel: its magnitude counts."""
+    s = np.array([[0.0, 10.0, 10.0]])  # outside Rec.709: R = -20.4, G = 19.2, B = 8.5
+    clamp_samples(s, M_XYZ_TO_REC709, 2.0)
+    rgb = s @ M_XYZ_TO_REC709.T
+    np.testing.assert_allclose(rgb[0, 0], -2.0, rtol=1e-12)  # the largest is |R|, not G
+    assert 1.8 < rgb[0, 1] < 2.0
 
 
 # ----------------------------------------------------------------------------- adaptive

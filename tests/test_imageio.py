@@ -93,6 +93,32 @@ def test_exr_round_trip(tmp_path):
     assert md["compression"] == "zip"
 
 
+def test_exr_denoising_layers_round_trip(tmp_path):
+    """albedo and normal become Albedo.R/G/B and Normal.X/Y/Z (Blender reads them as an
+    "Albedo" colour pass and a "Normal" vector pass); read back with OpenImageIO."""
+    rng = np.random.default_rng(3)
+    aovs = {"depth": _aovs()["depth"],
+            "albedo": rng.random((H, W, 3)).astype(np.float32),
+            "normal": rng.uniform(-1, 1, (H, W, 3)).astype(np.float32)}
+    path = tmp_path / "d.exr"
+    imageio.write_exr(path, _rgba(), aovs, _meta())
+    inp = oiio.ImageInput.open(str(path))
+    names = list(inp.spec().channelnames)
+    inp.close()
+    assert set(names) == {"R", "G", "B", "A", "Depth.Z", "Albedo.R", "Albedo.G", "Albedo.B",
+                          "Normal.X", "Normal.Y", "Normal.Z"}
+    channels, _ = imageio.read_exr(path)
+    for i, c in enumerate("RGB"):
+        np.testing.assert_array_equal(channels[f"Albedo.{c}"], aovs["albedo"][..., i])
+    for i, c in enumerate("XYZ"):
+        np.testing.assert_array_equal(channels[f"Normal.{c}"], aovs["normal"][..., i])
+    np.testing.assert_array_equal(channels["Depth.Z"], aovs["depth"])
+    assert imageio.aov_channel_names("normal") == ("Normal.X", "Normal.Y", "Normal.Z")
+    assert imageio.aov_channel_names("depth") == ("Depth.Z",)
+    with pytest.raises(ValueError, match="albedo"):  # a plane where RGB is due
+        imageio.write_exr(tmp_path / "e.exr", _rgba(), {"albedo": aovs["depth"]}, _meta())
+
+
 def test_metadata_for():
     m = imageio.metadata_for(3, np.array([0.5, 0, 0]), 2, 16, extra={"seed": 4, "x:y": 1.5})
     assert m["relray:frame"] == "3" and m["relray:spp"] == "16" and m["relray:ct"] == "2.0"

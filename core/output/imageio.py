@@ -4,16 +4,27 @@ Files of one frame (job-format.md, "Output contract"), row 0 = the top of the pi
 
 ``dir/stem.exr``  (``"exr"``)
     float32, zip compression. Channels ``R, G, B, A`` (linear Rec.709, scene-referred,
-    alpha = hit coverage) then one channel per AOV, named as Blender names its passes:
+    alpha = hit coverage) then the channels of each AOV, named ``Pass.Channel`` as
+    Blender names the passes of a multilayer EXR (no view-layer prefix: Blender reads
+    ``Albedo.R`` as the pass "Albedo" with channel R, and a pass with channels X, Y, Z
+    as a vector):
 
-    ===========  ==============  ============================================
-    AOV          EXR channel     value (per-pixel mean)
-    ===========  ==============  ============================================
-    depth        ``Depth.Z``     lab distance to the first hit (1e10: escaped)
-    doppler      ``Doppler.D``   Doppler factor D of the primary rays
-    lab_time     ``LabTime.T``   lab time of emission, t_shutter - distance
-    other names  the name        as given
-    ===========  ==============  ============================================
+    ===========  =====================  =============================================
+    AOV          EXR channels           value (per-pixel mean)
+    ===========  =====================  =============================================
+    depth        ``Depth.Z``            lab distance to the first hit (1e10: escaped)
+    doppler      ``Doppler.D``          Doppler factor D of the primary rays
+    lab_time     ``LabTime.T``          lab time of emission, t_shutter - distance
+    albedo       ``Albedo.R, .G, .B``   denoising albedo (Cycles' "Denoising
+                                        Albedo"), linear Rec.709 in [0, 1]
+    normal       ``Normal.X, .Y, .Z``   denoising normal (Cycles' "Denoising
+                                        Normal"), lab (world) frame, in [-1, 1]
+    other names  the name               as given
+    ===========  =====================  =============================================
+
+    The albedo and normal are the auxiliary images of OpenImageDenoise (Blender's
+    Denoise compositor node: Image ← the RGBA, Albedo ← ``Albedo``, Normal ←
+    ``Normal``); their definition: :mod:`..render.integrator`, "Denoising features".
 
     Metadata: see :func:`metadata_for` (``relray:*`` strings and ``Software``).
 
@@ -76,7 +87,12 @@ from ..render.film import FilmImage
 from ..scene.description import OUTPUT_FORMATS
 
 AOV_CHANNELS: dict[str, str] = {"depth": "Depth.Z", "doppler": "Doppler.D", "lab_time": "LabTime.T"}
-"""EXR channel name of each known AOV; other AOVs keep their own name."""
+"""EXR channel name of each known one-channel AOV; other AOVs keep their own name."""
+AOV_VECTOR_CHANNELS: dict[str, tuple[str, ...]] = {
+    "albedo": ("Albedo.R", "Albedo.G", "Albedo.B"),
+    "normal": ("Normal.X", "Normal.Y", "Normal.Z"),
+}
+"""EXR channel names of the AOVs with three components, in component order."""
 
 RGBA_CHANNELS = ("R", "G", "B", "A")
 
@@ -103,6 +119,11 @@ MetadataValue = str | float | int
 def aov_channel_name(aov: str) -> str:
     """EXR channel name of an AOV ("depth" -> "Depth.Z"; unknown names unchanged)."""
     return AOV_CHANNELS.get(aov, aov)
+
+
+def aov_channel_names(aov: str) -> tuple[str, ...]:
+    """EXR channel names of an AOV: ("Depth.Z",), ("Albedo.R", "Albedo.G", "Albedo.B"), ..."""
+    return AOV_VECTOR_CHANNELS.get(aov, (aov_channel_name(aov),))
 
 
 def spectral_channel_name(wavelength_nm: float) -> str:
@@ -286,7 +307,8 @@ def write_exr(
     aovs: Mapping[str, np.ndarray],
     metadata: Mapping[str, MetadataValue],
 ) -> None:
-    """Float32 zip EXR: R, G, B, A then one channel per AOV (:data:`AOV_CHANNELS`)."""
+    """Float32 zip EXR: R, G, B, A then each AOV's channels (:func:`aov_channel_names`);
+    an AOV is (h, w), or (h, w, 3) for ``albedo`` and ``normal``."""
     rgba = np.asarray(rgba, dtype=np.float32)
     if rgba.ndim != 3 or rgba.shape[2] != 4:
         raise ValueError(f"rgba has shape {rgba.shape}, want (h, w, 4)")
@@ -294,8 +316,11 @@ def write_exr(
     names = list(RGBA_CHANNELS)
     planes = [rgba]
     for aov, plane in aovs.items():
-        names.append(aov_channel_name(aov))
-        planes.append(_check_plane(f"AOV '{aov}'", plane, (h, w))[..., None])
+        channels = aov_channel_names(aov)
+        shape = (h, w) if len(channels) == 1 else (h, w, len(channels))
+        names.extend(channels)
+        plane = _check_plane(f"AOV '{aov}'", plane, shape)
+        planes.append(plane[..., None] if plane.ndim == 2 else plane)
     if len(set(names)) != len(names):
         raise ValueError(f"duplicate EXR channel names: {names}")
     attrs = {"compression": "zip", **dict(metadata)}

@@ -17,7 +17,9 @@ What is summed (per pixel, float64)
                           Σ Y², Y = s_1 the sensor's luminance channel; G in ``rgb``)
     ``sum_alpha[p]``      Σ α, α = 1 where the primary ray hit geometry, 0 where it
                           escaped
-    ``sum_aov[p, k]``     Σ a_k, one column per AOV, in the order of ``aov_names``
+    ``sum_aov[p, k]``     Σ a_k, one column per AOV component, in the order of
+                          ``aov_names`` (``albedo`` R, G, B and ``normal`` X, Y, Z take
+                          three columns each: :data:`AOV_COMPONENTS`)
     ``count[p]``          n, the samples taken
     ``sum_band[p, b]``    Σ over the sample's hero lanes j with λ_j in band b of
                           w_j = L(λ_j) / (4 p(λ_j))
@@ -78,6 +80,27 @@ Estimators (on :meth:`Film.resolve`)
       one degree of freedom per channel it is much noisier than var_c, and it gained
       less at equal samples, with no less bias.)
 
+Clamp (``render.clamp`` = C > 0; Cycles' "Clamp Direct/Indirect")
+    :func:`clamp_samples` scales each path sample down, before it reaches the film, so
+    that the largest absolute component of its linear Rec.709 value M · s is at most C:
+
+        k = min(1, C / max_c |(M s)_c|),   s ← k s,   w_j ← k w_j (the spectral bands)
+
+    One factor for the whole sample (its 3 sensor channels and its 4 hero lanes), so the
+    sample's colour (chromaticity) is unchanged; only its weight drops. It is the
+    quantity the film accumulates (a path's sensor values, w_D and 1/p(λ) included)
+    measured in the output's units, so a clamp of C guarantees that no sample adds more
+    than C to any RGB channel of a pixel's sum. Cycles instead scales each *contribution*
+    (every emission hit and light sample, with separate limits for the camera's first
+    bounce and later ones) so that the *mean* of its |R|, |G|, |B| is at most C
+    (intern/cycles/kernel/film/light_passes.h ``film_clamp_light``, the limit stored as
+    3 C by scene/integrator.cpp); relray clamps the whole path sample, by its largest
+    component, so at equal C it clamps at least as hard. Clamping is biased by design:
+    it removes energy (fireflies, but also true caustics and bright highlights seen
+    through few paths), and the image no longer converges to the right answer as spp
+    grows; the adaptive-sampling error is that of the clamped samples. C = 0 (the
+    default) skips it: the film then sees bit-identical samples.
+
 Finite outputs
     A sample with any non-finite value (sensor, alpha, an AOV, a hero wavelength or lane
     weight) is dropped whole in :meth:`Film.add_samples` and counted in
@@ -98,7 +121,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from ..scene.description import AOV_COMPONENTS, aov_components
+
 log = logging.getLogger("relray")
+
+__all__ = ["AOV_COMPONENTS", "Film", "FilmImage", "clamp_samples", "band_centers",
+           "window_mean", "LUMINANCE_FLOOR", "REL_ERROR_UNKNOWN"]
 
 LUMINANCE_FLOOR = 1e-4
 """Smallest |mean Y| used as the denominator of the relative error."""
@@ -114,7 +142,8 @@ class FilmImage:
     rgba: np.ndarray
     """float32 (h, w, 4): linear Rec.709, scene-referred; alpha = hit coverage."""
     aovs: dict[str, np.ndarray]
-    """float32 (h, w) each: per-pixel means ("depth", "doppler", "lab_time", ...)."""
+    """float32 per-pixel means: (h, w) each ("depth", "doppler", "lab_time", ...), (h, w, 3)
+    for "albedo" (R, G, B) and "normal" (X, Y, Z)."""
     spectral: np.ndarray | None
     """float32 (h, w, nb): mean camera-frame spectral radiance per band, or None."""
     band_centers_nm: np.ndarray | None
@@ -152,6 +181,44 @@ def band_centers(bands: tuple[float, float, float]) -> np.ndarray:
         raise ValueError(f"bad spectral bands (start, stop, step) = {bands}")
     n = int(math.floor((stop - start) / step + 1e-9)) + 1
     return start + step * np.arange(n, dtype=np.float64)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _clamp(sensor, lam_w, m, limit, n_lanes):  # pragma: no cover - compiled
+    """In place: each row's sensor values (and its ``n_lanes`` band weights) times
+    min(1, limit / max_c |(m · s)_c|). Returns how many samples were scaled down."""
+    scaled = 0
+    for i in range(sensor.shape[0]):
+        s0, s1, s2 = sensor[i, 0], sensor[i, 1], sensor[i, 2]
+        big = 0.0
+        for c in range(3):
+            big = max(big, abs(m[c, 0] * s0 + m[c, 1] * s1 + m[c, 2] * s2))
+        if big > limit:  # False for NaN: a non-finite sample stays for the film to drop
+            k = limit / big
+            sensor[i, 0] = s0 * k
+            sensor[i, 1] = s1 * k
+            sensor[i, 2] = s2 * k
+            for j in range(n_lanes):
+                lam_w[i, j] *= k
+            scaled += 1
+    return scaled
+
+
+def clamp_samples(sensor: np.ndarray, sensor_to_rgb: np.ndarray, limit: float,
+                  lam_weight: np.ndarray | None = None) -> int:
+    """``render.clamp``: scale each sample (row of ``sensor`` (N, 3), and of
+    ``lam_weight`` (N, lanes) when given) in place so that the largest absolute linear
+    Rec.709 component of ``sensor_to_rgb · s`` is at most ``limit`` > 0 (module
+    docstring, "Clamp"). Returns the number of samples scaled down."""
+    if not limit > 0.0:
+        raise ValueError(f"clamp limit must be > 0, got {limit}")
+    m = np.ascontiguousarray(sensor_to_rgb, np.float64)
+    if m.shape != (3, 3) or sensor.ndim != 2 or sensor.shape[1] != 3:
+        raise ValueError(f"clamp_samples: sensor {sensor.shape} / matrix {m.shape}")
+    lanes = np.zeros((0, 0), sensor.dtype) if lam_weight is None else lam_weight
+    if lam_weight is not None and lam_weight.shape[0] != sensor.shape[0]:
+        raise ValueError(f"clamp_samples: lam_weight {lam_weight.shape} for {sensor.shape}")
+    return int(_clamp(sensor, lanes, m, float(limit), lanes.shape[1]))
 
 
 @njit(cache=True, nogil=True)
@@ -243,6 +310,12 @@ class Film:
         self.aov_names: tuple[str, ...] = tuple(aovs)
         if len(set(self.aov_names)) != len(self.aov_names):
             raise ValueError(f"duplicate AOV names: {self.aov_names}")
+        #: the first column of each AOV in ``sum_aov`` and its number of components
+        self.aov_columns: dict[str, tuple[int, int]] = {}
+        col = 0
+        for name in self.aov_names:
+            self.aov_columns[name] = (col, aov_components(name))
+            col += aov_components(name)
         self.bands = None if bands is None else tuple(float(v) for v in bands)
         self.band_centers_nm = None if bands is None else band_centers(bands)
         self.luminance_floor = float(luminance_floor)
@@ -251,7 +324,7 @@ class Film:
         self.sum_sensor = np.zeros((n, 3), np.float64)
         self.sum_sq = np.zeros((n, 3), np.float64)
         self.sum_alpha = np.zeros(n, np.float64)
-        self.sum_aov = np.zeros((n, len(self.aov_names)), np.float64)
+        self.sum_aov = np.zeros((n, col), np.float64)
         self.count = np.zeros(n, np.int64)
         self.sum_band = np.zeros((n, nb), np.float64)
         self.nonfinite_samples = 0
@@ -354,16 +427,21 @@ class Film:
     def _stack_aovs(
         self, aov: dict[str, np.ndarray] | None, n_in: int, dtype: np.dtype
     ) -> np.ndarray:
-        """The film's AOVs as one (K, N) array, in ``aov_names`` order."""
+        """The film's AOVs as one (K, N) array, one row per component, in ``aov_names``
+        order (the columns of ``sum_aov``)."""
         dt = np.float32 if dtype == np.float32 else np.float64
-        out = np.empty((len(self.aov_names), n_in), dt)
-        for k, name in enumerate(self.aov_names):
+        out = np.empty((self.sum_aov.shape[1], n_in), dt)
+        for name, (k, nc) in self.aov_columns.items():
             if aov is None or name not in aov:
                 raise ValueError(f"add_samples: AOV '{name}' missing")
             a = np.asarray(aov[name])
-            if a.shape != (n_in,):
-                raise ValueError(f"add_samples: AOV '{name}' has shape {a.shape}, want ({n_in},)")
-            out[k] = a
+            want = (n_in,) if nc == 1 else (n_in, nc)
+            if a.shape != want:
+                raise ValueError(f"add_samples: AOV '{name}' has shape {a.shape}, want {want}")
+            if nc == 1:
+                out[k] = a
+            else:
+                out[k:k + nc] = a.T
         return out
 
     def merge(self, other: Film) -> None:
@@ -463,7 +541,9 @@ class Film:
         rgba[..., 3] = finite32(self._mean(self.sum_alpha).reshape(h, w))
         mean_aov = self._mean(self.sum_aov)
         aovs = {
-            name: finite32(mean_aov[:, k].reshape(h, w)) for k, name in enumerate(self.aov_names)
+            name: finite32(mean_aov[:, k].reshape(h, w) if nc == 1
+                           else mean_aov[:, k:k + nc].reshape(h, w, nc))
+            for name, (k, nc) in self.aov_columns.items()
         }
         spectral = None
         if self.num_bands:

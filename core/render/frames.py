@@ -32,7 +32,7 @@ from ..scene.geometry import Scene, build_scene
 from ..scene.motion import resolve_camera
 from .accel import MISS_DISTANCE, Accel
 from .camera import PinholeCamera
-from .film import Film
+from .film import Film, clamp_samples
 from .integrator import (
     KernelScene,
     kernel_scene,
@@ -211,6 +211,8 @@ class FrameRenderer:
         self.threads = settings.threads or os.cpu_count() or 1
         # moving bodies shift and beam as the camera does (physics.md, "Moving objects")
         self.kernel = prep.kernel._replace(shift=self.doppler, beam=self.searchlight)
+        # the denoising albedo/normal AOVs: traced only when asked for
+        self.features = "albedo" in self.aovs or "normal" in self.aovs
         self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
 
     def render(self, event: relativity.ShutterEvent, frame: int,
@@ -309,19 +311,24 @@ class FrameRenderer:
             lam, pdf, lamu, w_d, d_min, d_max = self.sampler.lanes(
                 u, D, doppler=self.doppler, searchlight=self.searchlight, out=lanes)
             nlanes = 4
-        L, t_hit, seg = trace(self.kernel, prep.tracer, s.max_depth, keys, o_local, d_lab,
-                              lamu, nlanes, sky_seen=not s.transparent,
-                              buffers=keep.setdefault("trace", {}), t0=float(event.t))
+        L, t_hit, seg, feats = trace(self.kernel, prep.tracer, s.max_depth, keys, o_local,
+                                     d_lab, lamu, nlanes, sky_seen=not s.transparent,
+                                     buffers=keep.setdefault("trace", {}), t0=float(event.t),
+                                     features=self.features)
         alpha = np.less(t_hit, MISS_DISTANCE, out=b["alpha"])  # 1.0 where it hit
         sensor, lam_weight = b["sensor"], b["lam_weight"]
         sensor_values(L, lam, pdf, w_d, self.response, self.rgb_mode, sensor, lam_weight,
                       self.bands is not None)
+        if s.clamp > 0.0:  # render.clamp (film.py, "Clamp"): off, the samples are untouched
+            clamp_samples(sensor, self.to_rgb, s.clamp, lam_weight if self.bands else None)
         if "doppler" in self.aovs and prep.scene.groups:
             D = D * body_doppler(prep.tracer, d_lab, seg)
         aov = {"doppler": D}  # the AOV arrays only when the film has them
         if "depth" in self.aovs or "lab_time" in self.aovs:
             dist = np.where(alpha > 0.0, t_hit + skipped, ESCAPED_DEPTH)
             aov.update(depth=dist, lab_time=event.t - dist)
+        if feats is not None:
+            aov.update(albedo=feats.albedo, normal=feats.normal)
         aov = {k: aov[k] for k in self.aovs}
         with lock:
             film.add_samples(pix, sensor, alpha, aov,

@@ -32,6 +32,31 @@ Each light crossing is thus counted once per ray segment, with the same visibili
 next-event estimation (whose shadow ray no light blocks) as for BSDF sampling, which
 keeps the MIS weights summing to 1. Scenes without area lights never call it
 (``area_tris`` is empty), so they run the kernels they ran before.
+
+Denoising features (the ``albedo`` and ``normal`` AOVs; :class:`Features`, only when
+asked for: ``trace(..., features=True)``).  As Cycles' "Denoising Albedo" and "Denoising
+Normal" passes (intern/cycles/kernel/film/denoising_passes.h,
+``film_write_denoising_features_surface``), adapted to relray's three lobes: a path
+looks for its first vertex whose non-specular lobes weigh more than a quarter,
+
+    w_ns = w_d + (w_m if α > 0.075 else 0)    (α = roughness²; glass is always specular)
+    written when 4 w_ns > w_d + w_m + w_g  (= 1),
+
+and writes there albedo = T · w_ns · base_color (linear Rec.709, the material's base
+colour as given: no spectrum, no Doppler, no Fresnel; an emitter's too, its emission
+ignored, as Cycles ignores emission closures) and normal = its shading normal (turned
+towards the ray, unit, in the lab frame: on a moving body, whose rest-frame shading
+normal is n, the normal of the surface the lab sees contracted along the body's velocity
+direction û, n + (γ - 1)(n·û)û normalised: :func:`lab_normal`).  Through a vertex that is
+mostly specular (a mirror, smooth metal, glass) the path goes on with
+T ← T · (w_m,specular · base_color + w_g) (T = 1 at the camera), as Cycles multiplies by
+the specular closures' albedo: the features then show what the mirror or the glass
+shows, what OpenImageDenoise recommends for delta surfaces ("the first diffuse or glossy
+(non-delta) hit", OIDN's documentation, "Albedo" and "Normal").  A path that escapes
+to the sky, or ends, before such a vertex gives 0 and 0 (OIDN's "no surface" normal).
+Cycles writes the normal in camera space; relray in world (lab) space, which OIDN
+accepts as well.  Per-pixel means of these (not renormalised, as in Cycles) are the
+AOVs.
 """
 
 from __future__ import annotations
@@ -82,6 +107,8 @@ from .sampling import (
 RR_DEPTH = 4
 # fastmath without nnan/ninf: NaN and infinity checks keep their meaning
 FAST_MATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+# Denoising features: a lobe whose GGX α is at most this is specular (Cycles' 0.075)
+FEATURE_SPECULAR_ALPHA = 0.075
 
 
 class KernelScene(NamedTuple):
@@ -124,6 +151,7 @@ class KernelScene(NamedTuple):
     shift: bool         # bodies shift wavelengths (``doppler``, not rgb)
     beam: bool          # bodies apply D⁵ (``searchlight``)
     area_tris: np.ndarray  # int32 (A,): the area lights' triangles (in no BVH), often none
+    mat_rgb: np.ndarray  # float32 (M, 3): base colours, linear Rec.709 (denoising albedo)
 
 
 class Paths(NamedTuple):
@@ -140,6 +168,15 @@ class Paths(NamedTuple):
     e_val: np.ndarray       # float32 (N, 4): its values per lane
     lamu: np.ndarray        # float32 (N, 4): each lane's table coordinate (unclamped)
     prev_moving: np.ndarray  # int32 (N,): 1 when the last vertex was on a moving body
+
+
+class Features(NamedTuple):
+    """The denoising features of a wavefront's paths (row: path; module docstring)."""
+
+    pending: np.ndarray  # int32 (N,): 1 until the path reaches its feature vertex
+    thr: np.ndarray      # float32 (N, 3): product of the specular albedos passed (RGB)
+    albedo: np.ndarray   # float32 (N, 3): the albedo written there (0 until then)
+    normal: np.ndarray   # float32 (N, 3): the lab-frame shading normal written (0 until then)
 
 
 class Rays(NamedTuple):
@@ -177,6 +214,8 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
              else np.full(len(lights.kind), -1, np.int32))
     vn = (np.zeros((1, 3, 3), np.float32) if normals is None
           else np.ascontiguousarray(normals, np.float32))
+    mat_rgb = (np.zeros((len(tables.mat_alpha), 3), np.float32) if tables.base_rgb is None
+               else np.ascontiguousarray(tables.base_rgb, np.float32))
     return KernelScene(
         geometry["v0"], geometry["e1"], geometry["e2"], geometry["ng"], geometry["area"],
         vn, normals is not None, np.ascontiguousarray(material_ids, np.int32),
@@ -186,7 +225,8 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
         lights.scale, lights.spot, lights.cdf, lights.tri_pmf, float(lights.sky_pmf),
         int(lights.sky_row), ray_offset(extent), *segments, l_seg, False, False,
         np.zeros(0, np.int32) if area_tris is None else np.ascontiguousarray(area_tris,
-                                                                             np.int32))
+                                                                             np.int32),
+        mat_rgb)
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
@@ -350,6 +390,17 @@ def lab_offset(pl, g, eps, side, h, b, ig):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lab_normal(n, h, ig):
+    """The lab normal of a moving body's surface whose rest-frame unit normal is ``n``
+    (velocity direction ``h``, 1/γ = ``ig``): the lab sees the surface contracted by 1/γ
+    along h, which stretches the normal's component along h by γ; unit length."""
+    k = (1.0 / ig - 1.0) * (n[0] * h[0] + n[1] * h[1] + n[2] * h[2])
+    x, y, z = n[0] + k * h[0], n[1] + k * h[1], n[2] + k * h[2]
+    inv = 1.0 / math.sqrt(x * x + y * y + z * z + 1e-30)
+    return x * inv, y * inv, z * inv
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def lerp_at(table, row, u, top):
     """table[row] linearly interpolated at the column u (clamped to [0, top])."""
     i, f = column(u, top)
@@ -400,7 +451,8 @@ def nee_factors(wo, wi, n, g, p_l, scale, delta, ok, wd, wm, a2):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
-def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen):
+def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen, feats,
+          want_feats):
     """One bounce for the live rays 0 ≤ i < n of ``rays`` (:class:`Rays`; ray i belongs to
     path ``rays.idx[i]`` of ``paths``, :class:`Paths`) and their ``hits``
     (:class:`accel.Hits`): hit → emission → next-event estimation → continuation →
@@ -411,7 +463,9 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
     into the front of ``rays`` (ray i is read before slot ≤ i is written), the shadow
     rays into the front of ``shadows`` (:class:`ShadowRays`).  Returns (continuing rays,
     shadow rays).  ``sky_seen = False`` (a transparent film) hides the sky from camera
-    rays (depth 0) only; ``nlanes`` is 4 (hero wavelengths) or 3 (rgb).
+    rays (depth 0) only; ``nlanes`` is 4 (hero wavelengths) or 3 (rgb).  With
+    ``want_feats`` the paths' denoising features (:class:`Features` ``feats``; module
+    docstring) are written at their feature vertex; without, ``feats`` is not touched.
 
     Light selection, sampling and pdfs are :mod:`.lights`' (:func:`select`,
     :func:`sample_light`, :func:`triangle_light_pdf`, :func:`sky_light_pdf`); the
@@ -431,7 +485,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
-     s_beam, _) = sc
+     s_beam, _, s_mat_rgb) = sc
+    f_pend, f_thr, f_alb, f_nrm = feats
     keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu, prev_moving = paths
     idx, o, d, rt = rays
     t_hit, prim, bu, bv, hseg = hits
@@ -489,6 +544,21 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen)
         nrm = g
         if s_has_vn:
             nrm = shading_normal(vertex_normal(s_vn, tri, bu[i], bv[i]), g, dx, dy, dz)
+        # ---- the denoising features: written at the first vertex whose non-specular
+        # lobes weigh more than 1/4, else carried through it (module docstring)
+        if want_feats and f_pend[pi] != 0:
+            wm_f = s_mat_w[m, 1]
+            rough_f = wm_f if s_mat_alpha[m] > FEATURE_SPECULAR_ALPHA else 0.0
+            ns_f = s_mat_w[m, 0] + rough_f
+            if 4.0 * ns_f > s_mat_w[m, 0] + wm_f + s_mat_w[m, 2]:
+                for c in range(3):
+                    f_alb[pi, c] = f_thr[pi, c] * ns_f * s_mat_rgb[m, c]
+                nf = lab_normal(nrm, sh, sig) if moving else nrm
+                f_nrm[pi, 0], f_nrm[pi, 1], f_nrm[pi, 2] = nf[0], nf[1], nf[2]
+                f_pend[pi] = 0
+            else:
+                for c in range(3):
+                    f_thr[pi, c] *= (wm_f - rough_f) * s_mat_rgb[m, c] + s_mat_w[m, 2]
         er = s_mat_emit_row[m]
         if er >= 0 and (front or s_mat_one_sided[m] == 0):
             w = 1.0
@@ -754,6 +824,13 @@ _TRACE_BUFFERS = (("L", 4, np.float32), ("thr", 4, np.float32), ("prev_pdf", 0, 
                   ("prev_moving", 0, np.int32))
 
 
+_FEATURE_BUFFERS = (("pending", 0, np.int32), ("thr", 3, np.float32),
+                    ("albedo", 3, np.float32), ("normal", 3, np.float32))
+# what shade is handed when no features are wanted (never read nor written then)
+_NO_FEATURES = Features(np.zeros(1, np.int32), np.zeros((1, 3), np.float32),
+                        np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32))
+
+
 def wavefront_buffers(n: int, keep: dict | None = None,
                       specs: tuple = _TRACE_BUFFERS) -> dict[str, np.ndarray]:
     """Uninitialised arrays for n paths: ``specs`` lists (name, columns or 0, dtype).
@@ -775,16 +852,18 @@ def wavefront_buffers(n: int, keep: dict | None = None,
 def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
           sky_seen: bool = True, buffers: dict | None = None,
-          t0: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          t0: float = 0.0, features: bool = False
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Features | None]:
     """Trace a wavefront of camera rays; returns (L (N,4) lab radiance, primary hit t,
-    primary hit's moving segment or -1).
+    primary hit's moving segment or -1, the paths' denoising :class:`Features` when
+    ``features``, else None).
 
     ``o_local`` (N,3) float32 origins in accelerator coordinates, ``d`` (N,3) float32 unit;
     both are used as the wavefront's ray buffers and are overwritten; ``t0`` the lab time
     of their origin event. ``accel``: a static scene's BVH, or the
     :class:`.rest_frames.MovingScene` when objects move (then every ray carries its lab
-    time). ``buffers``: see :func:`wavefront_buffers` (the returned L lives in them until
-    the next call).
+    time). ``buffers``: see :func:`wavefront_buffers` (the returned L and features live
+    in them until the next call).
     """
     n = len(keys)
     b = wavefront_buffers(n, buffers)
@@ -801,6 +880,14 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     rays.t[:] = t0
     shadows = ShadowRays(b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"], b["sh_t0"])
     column_split(lamu, sc.emit.shape[1], paths.li, paths.lf)
+    feats = _NO_FEATURES
+    if features:
+        keep = (buffers if buffers is not None else {}).setdefault("features", {})
+        feats = Features(**wavefront_buffers(n, keep, _FEATURE_BUFFERS))
+        feats.pending[:] = 1
+        feats.thr[:] = 1.0
+        feats.albedo[:] = 0.0
+        feats.normal[:] = 0.0
     moving = isinstance(accel, MovingScene)
     area_lights = len(sc.area_tris) > 0  # else not one more instruction per ray
     static_seg = b["seg"]
@@ -817,7 +904,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
             first_t, first_seg = hits.t, hits.seg.copy()
         if area_lights:
             cross_area_lights(sc, paths, rays, hits, m, depth, nlanes)
-        m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen)
+        m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen,
+                      feats, features)
         if ns:
             if moving:
                 blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns],
@@ -830,4 +918,4 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     if first_t is None:
         first_t = np.full(n, MISS_DISTANCE, np.float32)
         first_seg = np.full(n, -1, np.int32)
-    return paths.L, first_t, first_seg
+    return paths.L, first_t, first_seg, (feats if features else None)

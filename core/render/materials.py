@@ -39,6 +39,8 @@ class SpectralTables:
     mat_emit_row: np.ndarray  # int32 (M,): row in ``emit`` or -1
     mat_one_sided: np.ndarray  # int32 (M,): 1 = emits from the front face only
     mode: str
+    base_rgb: np.ndarray | None = None  # float32 (M, 3): base colour, linear Rec.709 in
+    #                                     [0, 1] (the denoising albedo AOV, not the spectra)
 
     def add_emission_row(self, row: np.ndarray) -> int:
         """Append one emitted-radiance row (float32 (G,)) and return its index."""
@@ -122,8 +124,10 @@ def build_tables(materials: list[MaterialSpec], mode: str) -> SpectralTables:
     alpha = np.array([max(m.roughness**2, 1e-4) for m in materials], np.float32)
     ior = np.array([m.ior for m in materials], np.float32)
     one_sided = np.array([int(m.one_sided_emission) for m in materials], np.int32)
+    base_rgb = np.clip(np.array([m.base_color for m in materials], np.float32).reshape(-1, 3),
+                       0.0, 1.0)
     tables = SpectralTables(refl, np.zeros((0, g), np.float32), weights, alpha, ior,
-                            np.full(len(materials), -1, np.int32), one_sided, mode)
+                            np.full(len(materials), -1, np.int32), one_sided, mode, base_rgb)
     for i, m in enumerate(materials):
         row = emission_spectrum(m, mode)
         if row is not None:

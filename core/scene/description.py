@@ -22,7 +22,11 @@ import numpy as np
 from ..physics.spectrum import MODES as SPECTRAL_MODES
 
 OUTPUT_FORMATS = ("exr", "png", "spectral-exr")
-AOV_NAMES = ("depth", "doppler", "lab_time")
+AOV_NAMES = ("depth", "doppler", "lab_time", "albedo", "normal")
+#: ``output.aovs`` when the job does not say: the denoising AOVs are asked for by name.
+DEFAULT_AOVS = ("depth", "doppler", "lab_time")
+#: Components of the AOVs that are not one number per pixel (RGB, XYZ).
+AOV_COMPONENTS = {"albedo": 3, "normal": 3}
 MOTION_MODES = ("snapshot", "worldline", "events")
 SHAPES = ("sphere", "box", "quad", "mesh")
 LIGHT_TYPES = ("point", "spot", "sun", "area")
@@ -37,11 +41,17 @@ AUTO_EXPOSURE = "auto"
 #: Exposures (given, or metered) lie within ±this many stops.
 MAX_EXPOSURE_STOPS = 64.0
 
-__all__ = ["SPECTRAL_MODES", "OUTPUT_FORMATS", "AOV_NAMES", "MOTION_MODES", "SHAPES",
+__all__ = ["SPECTRAL_MODES", "OUTPUT_FORMATS", "AOV_NAMES", "DEFAULT_AOVS", "AOV_COMPONENTS",
+           "aov_components", "MOTION_MODES", "SHAPES",
            "LIGHT_TYPES", "MAX_ABS_NUMBER", "AUTO_EXPOSURE", "MAX_EXPOSURE_STOPS", "frozen",
            "RenderSettings", "OutputSettings",
            "CameraSettings", "MotionSettings", "MaterialSpec", "ObjectSpec", "LightSpec",
            "SceneSpec", "Job"]
+
+
+def aov_components(name: str) -> int:
+    """Numbers per pixel of the AOV ``name``: 3 for ``albedo`` and ``normal``, else 1."""
+    return AOV_COMPONENTS.get(name, 1)
 
 
 def frozen(a: Any) -> np.ndarray:
@@ -66,6 +76,9 @@ class RenderSettings:
     searchlight: bool = True
     threads: int = 0
     transparent: bool = False
+    clamp: float = 0.0
+    """Largest linear Rec.709 component of one path sample (0: off); see
+    :func:`..render.film.clamp_samples`."""
 
 
 @dataclass(frozen=True)
@@ -89,7 +102,7 @@ class OutputSettings:
     name: str = "frame_{frame:04d}"
     formats: tuple[str, ...] = ("exr", "png")
     spectral_bands: tuple[float, float, float] = (380.0, 780.0, 10.0)
-    aovs: tuple[str, ...] = ("depth", "doppler", "lab_time")
+    aovs: tuple[str, ...] = DEFAULT_AOVS
     exposure: float | str = 0.0
     view_transform: ViewTransform | None = None
 

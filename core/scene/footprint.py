@@ -14,7 +14,7 @@ from pathlib import Path
 
 from .. import resources
 from ..errors import UserError
-from .description import OutputSettings, RenderSettings
+from .description import OutputSettings, RenderSettings, aov_components
 
 GIB = 2.0**30
 
@@ -36,12 +36,13 @@ def check_memory(render: RenderSettings, output: OutputSettings,
     if limit is None:
         return
     bands = spectral_band_count(output)
-    film = resources.render_memory_bytes(render.width, render.height, len(output.aovs), bands)
+    layers = sum(aov_components(a) for a in output.aovs)  # albedo, normal: 3 each
+    film = resources.render_memory_bytes(render.width, render.height, layers, bands)
     triangles = sum(n for _, n in parts)
     geometry = resources.geometry_memory_bytes(triangles)
     if film + geometry <= limit.bytes:
         return
-    detail = (f"{render.width} x {render.height} pixels ({len(output.aovs)} AOVs, {bands} "
+    detail = (f"{render.width} x {render.height} pixels ({layers} AOV channels, {bands} "
               f"spectral bands): {film / GIB:.1f} GiB; {triangles} triangles: "
               f"{geometry / GIB:.1f} GiB")
     if geometry > film:  # the key of what takes most

@@ -166,7 +166,7 @@ def _render(r: schema.Render, ctx: _Ctx) -> RenderSettings:
         width=r.width, height=r.height, spp=r.spp, noise_threshold=r.noise_threshold,
         max_depth=r.max_depth, seed=r.seed, spectral=r.spectral, doppler=r.doppler,
         searchlight=r.searchlight, threads=_threads(r.threads, ctx, "threads"),
-        transparent=r.transparent,
+        transparent=r.transparent, clamp=float(r.clamp),
     )
 
 
@@ -814,6 +814,8 @@ def job_summary(job: Job) -> str:
         f"spectral    {r.spectral}, doppler {'on' if r.doppler else 'off'}, "
         f"searchlight {'on' if r.searchlight else 'off'}"
     )
+    lines.append(f"clamp       {r.clamp:g} (the largest RGB component of a path sample; "
+                 "biased)" if r.clamp > 0 else "clamp       off")
     exposure = o.exposure if isinstance(o.exposure, str) else f"{o.exposure:g}"
     lines.append(f"output      {o.dir / o.name}.{{{','.join(o.formats)}}}, exposure {exposure}")
     if o.aovs:

@@ -70,6 +70,7 @@ from . import shapes
 from .description import (
     AOV_NAMES,
     AUTO_EXPOSURE,
+    DEFAULT_AOVS,
     LIGHT_TYPES,
     MAX_ABS_NUMBER,
     MAX_EXPOSURE_STOPS,
@@ -357,6 +358,10 @@ class Render(Table):
     transparent: Bool = Field(
         False, description="The camera does not see the sky (alpha 0, no radiance); the sky "
                            "still lights the scene.")
+    clamp: NonNegative = Field(
+        0.0, description="Firefly clamp (Cycles' Clamp): one path sample adds at most this to "
+                         "any linear Rec.709 channel (scaled down whole, so its colour stays); "
+                         "biased; 0 = off.")
 
 
 class ViewTransformTable(Table):
@@ -392,7 +397,9 @@ class Output(Table):
         [380.0, 780.0, 10.0], description="nm: start, stop, step of the spectral-exr bands; "
                                           "inside 360..830, step ≥ 0.1, whole steps.")
     aovs: Annotated[list[_choice(AOV_NAMES)], Expect("an array of strings")] = Field(
-        list(AOV_NAMES), description="Extra EXR layers (Depth.Z, Doppler.D, LabTime.T).")
+        list(DEFAULT_AOVS), description="Extra EXR layers (Depth.Z, Doppler.D, LabTime.T, "
+                                        "Albedo.R/G/B, Normal.X/Y/Z: the denoising albedo "
+                                        "and normal, asked for by name).")
     exposure: Annotated[
         Annotated[Number, Field(ge=-MAX_EXPOSURE_STOPS, le=MAX_EXPOSURE_STOPS)]
         | Literal[AUTO_EXPOSURE],  # type: ignore[valid-type]
