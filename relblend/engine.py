@@ -40,6 +40,9 @@ PASSES = {
     "Depth": (1, "Z", "VALUE", "depth"),
     "Doppler": (1, "D", "VALUE", "doppler"),
     "LabTime": (1, "T", "VALUE", "lab_time"),
+    # Cycles' denoising data, for the compositor's Denoise node (OpenImageDenoise)
+    "Denoising Albedo": (3, "RGB", "COLOR", "albedo"),
+    "Denoising Normal": (3, "XYZ", "VECTOR", "normal"),
 }
 #: Seconds between test_break / progress polls while the core renders.
 POLL_SECONDS = 0.1
@@ -345,6 +348,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         w, h = ex.width, ex.height
         threads = rs.threads or scene.render.threads
         settings = RenderSettings(width=w, height=h, spp=rs.samples, max_depth=rs.max_depth,
+                                  clamp=rs.clamp,
                                   noise_threshold=(rs.adaptive_threshold
                                                    if rs.use_adaptive_sampling else 0.0),
                                   seed=rs.seed, spectral=rs.spectral, doppler=rs.doppler,
@@ -445,9 +449,9 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         layer = result.layers[0]
         layer.passes["Combined"].rect = rgba.reshape(-1, 4)
         for name in passes:
-            aov = PASSES[name][3]
+            channels, _, _, aov = PASSES[name]
             if aov is not None:
-                plane = np.array(image.aovs[aov][::-1], np.float32).reshape(-1, 1)
+                plane = np.array(image.aovs[aov][::-1], np.float32).reshape(-1, channels)
                 layer.passes[name].rect = plane
         self.end_result(result)
         if exposure is not None:  # on the final result: a partial one's stamps are lost
@@ -460,9 +464,12 @@ def file_planes(image, passes: list[str], layer: str) -> dict[str, np.ndarray]:
     """The extra passes as multilayer EXR channels: ``<layer>.<Pass>.<channel>``."""
     out = {}
     for name in passes:
-        _, chan, _, aov = PASSES[name]
-        if aov is not None:
-            out[f"{layer}.{name}.{chan}"] = image.aovs[aov]
+        channels, chan, _, aov = PASSES[name]
+        if aov is None:
+            continue
+        plane = np.asarray(image.aovs[aov]).reshape(*image.aovs[aov].shape[:2], channels)
+        for i, c in enumerate(chan):
+            out[f"{layer}.{name}.{c}"] = plane[..., i]
     return out
 
 
@@ -700,6 +707,8 @@ def enabled_passes(view_layer) -> list[str]:
         names.append("Doppler")
     if settings is None or settings.use_pass_lab_time:
         names.append("LabTime")
+    if settings is not None and settings.use_pass_denoising:
+        names += ["Denoising Albedo", "Denoising Normal"]
     return names
 
 

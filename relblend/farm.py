@@ -579,8 +579,11 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
                    "max_depth": rs.max_depth, "seed": rs.seed, "spectral": rs.spectral,
                    "doppler": rs.doppler, "searchlight": rs.searchlight, "threads": 0,
                    "noise_threshold": rs.adaptive_threshold if rs.use_adaptive_sampling
-                   else 0.0},
+                   else 0.0, "clamp": rs.clamp},
         "output": {"dir": "out", "name": "frame_{frame:04d}", "formats": ["exr", "png"],
+                   "aovs": ["depth", "doppler", "lab_time"]
+                   + (["albedo", "normal"] if scene.view_layers[0].relray.use_pass_denoising
+                      else []),
                    **colour_management(scene, out, cm_warnings)},
         "camera": {"position": [float(x) for x in cam_settings.position],
                    "rotation": np.asarray(cam_settings.rotation).tolist(),

@@ -182,6 +182,10 @@ class RelraySceneSettings(bpy.types.PropertyGroup):
         name="Threshold", description="Relative error at which a pixel stops (the core's "
         "render.noise_threshold)", min=0.0001, soft_max=0.5, default=0.01, precision=4,
         step=0.1)
+    clamp: FloatProperty(
+        name="Clamp", description="Largest value a path sample may add to a pixel's R, G or "
+        "B (the sample is scaled down, its colour kept); removes fireflies at the cost of "
+        "bias. 0: off", min=0.0, soft_max=100.0, default=0.0)
     preview_samples: IntProperty(
         name="Viewport Samples", description="Samples per pixel of the Rendered viewport "
         "(it refines progressively up to this count)", min=1, soft_max=1024, default=32)
@@ -246,6 +250,10 @@ class RelrayViewLayerSettings(bpy.types.PropertyGroup):
 
     use_pass_doppler: BoolProperty(name="Doppler", default=True,
                                    description="Doppler factor D of the primary rays")
+    use_pass_denoising: BoolProperty(
+        name="Denoising Data", default=False,
+        description="Denoising Albedo and Denoising Normal passes (as Cycles'), for the "
+                    "compositor's Denoise node (OpenImageDenoise)")
     use_pass_lab_time: BoolProperty(name="Lab Time", default=True,
                                     description="Lab time of emission of the first hit")
 

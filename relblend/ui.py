@@ -230,6 +230,7 @@ class RELRAY_PT_sampling(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender 
                     "Samples")
         layout.prop(rs, "preview_samples")
         layout.prop(rs, "max_depth")
+        layout.prop(rs, "clamp")
         layout.prop(rs, "seed")
         layout.prop(rs, "threads")
 
@@ -301,6 +302,7 @@ class RELRAY_PT_passes(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender na
         col.prop(vl, "use_pass_z")
         col.prop(vl.relray, "use_pass_doppler")
         col.prop(vl.relray, "use_pass_lab_time")
+        col.prop(vl.relray, "use_pass_denoising")
 
 
 class RELRAY_PT_light(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
