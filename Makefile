@@ -51,12 +51,13 @@ test: $(STAMP)
 test-blender: $(STAMP)
 	tests/blender/real_blender.sh all
 
-## make blender-pictures: the README's pictures of the Relativity panels, captured from an
-## interactive Blender on a virtual display in the same chroot (docs/blender/)
+## make blender-pictures: the README's pictures of the Relativity panels and the Rendered
+## viewport, captured from an interactive Blender on a virtual display in the same chroot
+## (docs/blender/)
 blender-pictures: $(STAMP)
-	tests/blender/real_blender.sh all -k relativity_panels
+	tests/blender/real_blender.sh all -k test_viewport_draw
 	mkdir -p docs/blender
-	cp $${RELRAY_CACHE:-$$HOME/.cache/relray}/trixie-blender/tmp/relray-pictures/panel_*.png docs/blender/
+	cp $${RELRAY_CACHE:-$$HOME/.cache/relray}/trixie-blender/tmp/relray-pictures/*.png docs/blender/
 	@echo "pictures in docs/blender/"
 
 ## make extension: the Blender extension zips in dist/ (linux-x64, macos-arm64,

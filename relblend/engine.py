@@ -197,7 +197,8 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         if self.viewport.error is not None:
             self.view_error = f"{type(self.viewport.error).__name__}: {self.viewport.error}"
         if image is not None and image.rgba.shape[:2] == (height, width):
-            draw_image(self, depsgraph.scene, image.rgba)
+            draw_image(self, depsgraph.scene, image.rgba,
+                       opaque=not depsgraph.scene.render.film_transparent)
         if self.view_error:
             self.update_stats("", f"relray: {self.view_error}")
         elif image is not None:
@@ -627,12 +628,16 @@ class FcurveSampler:
         return m
 
 
-def draw_image(engine, scene, rgba: np.ndarray) -> None:
+def draw_image(engine, scene, rgba: np.ndarray, opaque: bool = True) -> None:
     """Draw a linear RGBA image over the region through the scene's view transform
-    (``bind_display_space_shader``), premultiplied alpha."""
+    (``bind_display_space_shader``), premultiplied alpha; ``opaque``: alpha 1 (as F12
+    without a transparent film), so the background is the world's, not the viewport's."""
     import gpu
     from gpu_extras.presets import draw_texture_2d
 
+    if opaque:
+        rgba = rgba.copy()
+        rgba[..., 3] = 1.0
     h, w = rgba.shape[:2]
     buffer = gpu.types.Buffer("FLOAT", w * h * 4, np.ascontiguousarray(rgba).ravel())
     texture = gpu.types.GPUTexture((w, h), format="RGBA16F", data=buffer)

@@ -132,6 +132,9 @@ def _poll() -> float | None:
                 area.tag_redraw()
     if done:
         stop_status()
+        workspace = getattr(bpy.context, "workspace", None)
+        if workspace is not None and hasattr(workspace, "status_text_set_internal"):
+            workspace.status_text_set_internal(None)  # redraws the status bar
         return None
     return POLL_SECONDS
 

@@ -2,6 +2,7 @@
 viewport_probe.py -- OUT_DIR MODE``), driven by timers since the viewport renders while
 Blender's event loop runs. Not a test file: :mod:`test_viewport_draw` starts it.
 
+The scene comes from the .blend the test saved (the add-on enabled with ``--addons``).
 MODE "viewport": the Cornell box through the scene camera in a maximised 3D view with
 Rendered shading; once the viewport session's image is done, the screen is captured with
 ``xwd`` and ``OUT_DIR/probe.json`` says where the 3D view's region is and where its
@@ -14,7 +15,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 import bpy
 
@@ -22,7 +22,7 @@ argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
 OUT, MODE = argv[0], argv[1]
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [p for p in ("/opt/relray-py313", HERE) if os.path.isdir(p)]
-STATE = {"t0": time.monotonic()}
+STATE: dict = {}
 PACKAGE = "bl_ext.user_default.relray"
 
 
@@ -33,7 +33,8 @@ def fail(message: str) -> None:
 
 
 def capture(name: str) -> str:
-    bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=3)
+    with bpy.context.temp_override(window=window()):
+        bpy.ops.wm.redraw_timer(type="DRAW_WIN_SWAP", iterations=3)
     path = os.path.join(OUT, name)
     subprocess.run(["xwd", "-root", "-silent", "-out", path], check=True)
     return path
@@ -43,28 +44,51 @@ def rect(obj) -> list[int]:
     return [int(obj.x), int(obj.y), int(obj.width), int(obj.height)]
 
 
+def window():
+    return bpy.context.window_manager.windows[0]
+
+
+def areas():
+    return window().screen.areas
+
+
 def view_area():
-    return next(a for a in bpy.context.window.screen.areas if a.type == "VIEW_3D")
+    return next(a for a in areas() if a.type == "VIEW_3D")
+
+
+def guarded(fn):
+    """A timer callback that reports an exception to the test instead of leaving an
+    interactive Blender running."""
+    def run(*args):
+        try:
+            return fn(*args)
+        except Exception as e:  # noqa: BLE001 - reported to the test
+            import traceback
+
+            fail(f"{e}\n{traceback.format_exc()}")
+            return None
+    return run
+
+
+@guarded
+def watchdog():
+    fail("the probe did not finish within 420 s")
 
 
 def setup_viewport():
-    import scenes
-
-    bpy.ops.preferences.addon_enable(module=PACKAGE)
-    scene = scenes.build_cornell(width=160, height=160)
-    scene.relray.preview_samples = 4
-    area = view_area()
-    with bpy.context.temp_override(area=area, region=area.regions[-1]):
-        bpy.ops.screen.screen_full_area()
+    """The scene (built and saved by the test) through its camera in the 3D view."""
     area = view_area()
     space = area.spaces[0]
     space.overlay.show_overlays = False
     space.show_gizmo = False
+    space.show_region_toolbar = False
+    space.show_region_ui = False
     space.region_3d.view_perspective = "CAMERA"
     space.shading.type = "RENDERED"
     bpy.app.timers.register(wait_viewport, first_interval=1.0)
 
 
+@guarded
 def wait_viewport():
     engine = sys.modules[PACKAGE + ".relblend.engine"] \
         if PACKAGE + ".relblend.engine" in sys.modules else None
@@ -75,9 +99,6 @@ def wait_viewport():
         fail(f"viewport error: {errors}")
         return None
     if not done:
-        if time.monotonic() - STATE["t0"] > 400:
-            fail("the viewport image was not done within 400 s")
-            return None
         view_area().tag_redraw()
         return 0.5
     import numpy as np
@@ -88,58 +109,67 @@ def wait_viewport():
     shot = capture("screen.xwd")
     with open(os.path.join(OUT, "probe.json"), "w") as f:
         json.dump({"screen": shot, "region": rect(region),
-                   "window": [bpy.context.window.width, bpy.context.window.height],
+                   "window": [window().width, window().height],
                    "samples": done[-1].samples}, f)
     bpy.ops.wm.quit_blender()
     return None
 
 
 def setup_panels():
-    import scenes
-
-    bpy.ops.preferences.addon_enable(module=PACKAGE)
-    scene = scenes.build_cornell(width=160, height=160)
-    scene.relray.speed_of_light = 10.0
-    cam = scene.camera
-    cam.data.relray.motion_source = "ANIMATION"
-    props = next(a for a in bpy.context.window.screen.areas if a.type == "PROPERTIES")
-    STATE["shots"] = [("scene", "SCENE", None), ("camera", "DATA", cam),
+    """The Properties editor, maximised, on the scene's, the camera's and an object's
+    tab."""
+    props = next(a for a in areas() if a.type == "PROPERTIES")
+    with bpy.context.temp_override(window=window(), area=props,
+                                   region=next(r for r in props.regions
+                                               if r.type == "WINDOW")):
+        bpy.ops.screen.screen_full_area()
+    scene = bpy.context.scene
+    STATE["shots"] = [("scene", "SCENE", None), ("camera", "DATA", scene.camera),
                       ("object", "OBJECT", next(o for o in scene.objects if o.type == "MESH"))]
-    STATE["props"] = props
     bpy.app.timers.register(next_panel, first_interval=1.0)
 
 
+@guarded
 def next_panel():
     if not STATE["shots"]:
+        with open(os.path.join(OUT, "probe.json"), "w") as f:
+            json.dump({"panels": "done"}, f)
         bpy.ops.wm.quit_blender()
         return None
-    name, context, obj = STATE["shots"].pop(0)
+    name, context, obj = STATE["shots"][0]
     if obj is not None:
-        bpy.context.view_layer.objects.active = obj
-    props = next(a for a in bpy.context.window.screen.areas if a.type == "PROPERTIES")
+        window().view_layer.objects.active = obj
+        obj.select_set(True)
+    bpy.app.timers.register(show_tab, first_interval=0.5)
+    return None
+
+
+@guarded
+def show_tab():
+    """The Properties editor's tab, once it lists the active object's tabs."""
+    name, context, _ = STATE["shots"].pop(0)
+    props = next(a for a in areas() if a.type == "PROPERTIES")
     props.spaces[0].context = context
+    props.tag_redraw()
     bpy.app.timers.register(lambda: shoot_panel(name), first_interval=1.0)
     return None
 
 
+@guarded
 def shoot_panel(name: str):
-    props = next(a for a in bpy.context.window.screen.areas if a.type == "PROPERTIES")
+    props = next(a for a in areas() if a.type == "PROPERTIES")
     shot = capture(f"{name}.xwd")
     with open(os.path.join(OUT, f"{name}.json"), "w") as f:
         json.dump({"screen": shot, "area": rect(props),
-                   "window": [bpy.context.window.width, bpy.context.window.height]}, f)
+                   "window": [window().width, window().height]}, f)
     bpy.app.timers.register(next_panel, first_interval=0.2)
     return None
 
 
+@guarded
 def start():
-    try:
-        (setup_viewport if MODE == "viewport" else setup_panels)()
-    except Exception as e:  # noqa: BLE001 - reported to the test
-        import traceback
-
-        fail(f"{e}\n{traceback.format_exc()}")
-    return None
+    (setup_viewport if MODE == "viewport" else setup_panels)()
 
 
 bpy.app.timers.register(start, first_interval=1.0)
+bpy.app.timers.register(watchdog, first_interval=420.0)
