@@ -3,12 +3,14 @@ named, renders that would not fit refused."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import bpy
 import numpy as np
 import pytest
 import rendering
 import scenes
-from conftest import ext_module
+from conftest import HOST, ext_module
 
 
 def odd_material(folder) -> bpy.types.Material:
@@ -186,5 +188,11 @@ def test_denoising_passes_feed_the_compositors_denoise_node(cornell, engine, tmp
         return float(np.abs(4 * y[1:-1, 1:-1] - y[:-2, 1:-1] - y[2:, 1:-1] - y[1:-1, :-2]
                             - y[1:-1, 2:]).mean())
 
-    assert roughness(clean) < 0.5 * roughness(noisy), (roughness(clean), roughness(noisy))
     assert abs(clean.mean() / noisy.mean() - 1.0) < 0.1
+    # Debian's Blender 4.3 (make test-blender) is built without OpenImageDenoise: there
+    # the node passes the image through; the bpy module (make test) has it and denoises.
+    has_oidn = "OpenImageDenoise" in Path("/proc/self/maps").read_text()
+    assert has_oidn or HOST == "blender", "the bpy module ships OpenImageDenoise"
+    if has_oidn:
+        assert roughness(clean) < 0.5 * roughness(noisy), (roughness(clean),
+                                                           roughness(noisy))
