@@ -29,7 +29,7 @@ import hashlib
 import threading
 import time
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import bpy
 import numpy as np
@@ -277,7 +277,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
     def _setup_animation(self, depsgraph, cam, frame: int) -> FrameSetup:
         """A camera whose motion is its animation: its event on the scene clock, and the
         objects that move along their animation (:mod:`.animation`)."""
-        from . import animation, export
+        from . import animation, export, motion
 
         scene = depsgraph.scene
         clock = scene_clock(scene)
@@ -297,9 +297,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
             self.frame_set(frame, 0.0)
         exported = export.export_scene(depsgraph, cam, self.resolution_x, self.resolution_y,
                                        test_break=self.test_break, animated=moving)
-        from .motion import gamma_or_zero
-
-        return FrameSetup(frame, event, exported, gamma_or_zero(event.beta))
+        return FrameSetup(frame, event, exported, motion.gamma_or_zero(event.beta))
 
     def _worldline_history(self, depsgraph, cam, frame: int):
         """β (lab) of frames min(start, frame) .. frame - 1, and the worldline clock."""
@@ -334,7 +332,6 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
     def _render_frame(self, depsgraph, setup: FrameSetup) -> None:
         from ..core.render import frames as core_render
         from ..core.render.camera import PinholeCamera
-        from ..core.scene.description import RenderSettings
         from . import warmup
         from .motion import view_doppler_range
 
@@ -347,13 +344,7 @@ class RelrayRenderEngine(bpy.types.RenderEngine):
         rs = scene.relray
         ex = setup.exported
         w, h = ex.width, ex.height
-        threads = rs.threads or scene.render.threads
-        settings = RenderSettings(width=w, height=h, spp=rs.samples, max_depth=rs.max_depth,
-                                  clamp=rs.clamp,
-                                  noise_threshold=(rs.adaptive_threshold
-                                                   if rs.use_adaptive_sampling else 0.0),
-                                  seed=rs.seed, spectral=rs.spectral, doppler=rs.doppler,
-                                  searchlight=rs.searchlight, threads=threads)
+        settings = render_settings(scene, w, h)
         layer = depsgraph.view_layer
         passes = enabled_passes(layer)
         aovs = tuple(PASSES[p][3] for p in passes if PASSES[p][3] is not None)
@@ -498,6 +489,21 @@ _STARTED = [0.0]  # time.time() when the last frame's render began (written_file
 LAST_CANCEL_LATENCY: float | None = None
 
 
+def render_settings(scene, width: int, height: int):
+    """The core's RenderSettings of the scene's Relativistic settings (F12's; the viewport
+    replaces the sample count)."""
+    from ..core.scene.description import RenderSettings
+
+    rs = scene.relray
+    return RenderSettings(width=width, height=height, spp=rs.samples, max_depth=rs.max_depth,
+                          clamp=rs.clamp,
+                          noise_threshold=(rs.adaptive_threshold
+                                           if rs.use_adaptive_sampling else 0.0),
+                          seed=rs.seed, spectral=rs.spectral, doppler=rs.doppler,
+                          searchlight=rs.searchlight,
+                          threads=rs.threads or scene.render.threads)
+
+
 def region_camera(context, width: int, height: int):
     """The core camera of the 3D view being drawn."""
     from . import export
@@ -512,8 +518,8 @@ def region_camera(context, width: int, height: int):
 
 def view_scene(context, depsgraph, width: int, height: int):
     """(exported scene, prepared scene, animated objects, content hash) for the viewport:
-    exported
-    again only after a ``view_update`` (the engine keeps it while the view just moves)."""
+    exported again only after a ``view_update`` (the engine keeps it while the view just
+    moves)."""
     from ..core.errors import UserError
     from . import export, motion
 
@@ -536,7 +542,6 @@ def view_state(context, depsgraph, width: int, height: int, exported):
     :func:`view_scene` and the viewport sample count."""
     from ..core.errors import UserError
     from ..core.physics import relativity
-    from ..core.scene.description import RenderSettings
     from . import motion, viewport
 
     scene = depsgraph.scene
@@ -548,10 +553,9 @@ def view_state(context, depsgraph, width: int, height: int, exported):
                                cam, objects=False)
     except (motion.MotionError, UserError) as e:
         raise RenderFailed(str(e)) from None
-    settings = RenderSettings(width=width, height=height, spp=max(1, rs.preview_samples),
-                              max_depth=rs.max_depth, seed=rs.seed, spectral=rs.spectral,
-                              doppler=rs.doppler, searchlight=rs.searchlight,
-                              threads=rs.threads or scene.render.threads)
+    # the viewport refines by sample batches, which adaptive sampling does not take
+    settings = replace(render_settings(scene, width, height), spp=max(1, rs.preview_samples),
+                       noise_threshold=0.0)
     key = hashlib.blake2b(repr((scene_key, np.asarray(
         cam.rotation).tobytes(), np.asarray(cam.position).tobytes(), cam.fov, cam.shift,
         relativity.ShutterEvent.four_position(event).tobytes(), event.beta.tobytes(),
