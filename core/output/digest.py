@@ -47,7 +47,7 @@ IGNORED = {("Job", "path"), ("RenderSettings", "threads"), ("OutputSettings", "d
            ("OutputSettings", "name"), ("Job", "motion")}
 """(class, field) pairs left out of :func:`job_digest`: they do not change a frame's
 pixels (``Job.motion``: only through the frame's event, in :func:`frame_digest`)."""
-OMITTED_IF_NONE = {("ShutterEvent", "rotation")}
+OMITTED_IF_NONE = {("ShutterEvent", "rotation"), ("SceneSpec", "environment")}
 """(class, field) pairs left out while None (the default): added after digests were
 recorded, they keep the digests of frames rendered before them valid."""
 METADATA_KEY = "relray:digest"

@@ -78,6 +78,7 @@ from ..errors import UserError
 from . import gltf, shapes, worldlines
 from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
 from .footprint import check_memory
+from .sky import EnvironmentImage, load_environment
 from .worldlines import VelocityGroup
 
 log = logging.getLogger("relray")
@@ -112,6 +113,8 @@ class Scene:
     # the area lights' quads: the last ``light_triangles`` of the static triangles,
     # triangles[n_geometry:n_static]; lights, not geometry (no BVH: no shadow, no back)
     light_triangles: int = 0
+    # the environment map (scene.environment, read by sky.load_environment), or None
+    environment: EnvironmentImage | None = None
 
     @property
     def n_static(self) -> int:
@@ -334,7 +337,8 @@ def build_scene(job: Job) -> Scene:
     return scene_from_parts(triangles, normals, material_ids, materials,
                             [*lights, *job.scene.lights], job.scene.background, camera,
                             file=job.path, named_parts=named, tri_group=tri_group,
-                            groups=tuple(groups))
+                            groups=tuple(groups),
+                            environment=load_environment(job.scene.environment, job.path))
 
 
 def _gltf_parts(gl: gltf.GltfScene, group_of: Sequence[int],
@@ -358,6 +362,7 @@ def scene_from_parts(
     background: Sequence[float], camera: CameraSettings | None = None, *,
     file: str | Path | None = None, named_parts: Sequence[tuple[str, int]] = (),
     tri_group: np.ndarray | None = None, groups: tuple[VelocityGroup, ...] = (),
+    environment: EnvironmentImage | None = None,
 ) -> Scene:
     """A :class:`Scene` from triangle arrays and specs: what :func:`build_scene` does to
     a job's geometry once it is read (for callers with their own geometry: the add-on).
@@ -435,6 +440,7 @@ def scene_from_parts(
         tri_group=np.ascontiguousarray(tri_group, np.int32) if groups else None,
         groups=tuple(groups),
         light_triangles=light_triangles,
+        environment=environment,
     )
 
 

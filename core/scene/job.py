@@ -70,6 +70,7 @@ from ..files import MAX_TEXT_BYTES, check_readable, read_input, resolve_path
 from ..physics import relativity
 from . import gltf, schema, shapes, worldlines
 from .description import (
+    EnvironmentSpec,
     CameraSettings,
     Job,
     LightSpec,
@@ -613,7 +614,25 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         objects=tuple(objects),
         lights=tuple(lights),
         includes=tuple(includes),
+        environment=_environment(s, sctx, job_dir),
     )
+
+
+def _environment(s: schema.Scene, ctx: _Ctx, job_dir: Path) -> EnvironmentSpec | None:
+    """``scene.environment``: the map's file resolved and readable. It replaces the
+    background: a non-zero ``background`` beside it is refused (one sky, never a silent
+    choice between two)."""
+    if s.environment is None:
+        return None
+    if any(c > 0.0 for c in s.background):
+        raise ctx.error("background", "scene.environment replaces the background: give "
+                        "one of them (background = [0, 0, 0] or no environment)")
+    env = s.environment
+    ectx = ctx.sub("environment")
+    path = _resolve_path(env.file, job_dir, ectx, "file")
+    check_readable(path, ectx.key("file"), ectx.file)
+    return EnvironmentSpec(file=path, strength=float(env.strength),
+                           rotation_z=float(env.rotation_z))
 
 
 # -------------------------------------------------------------------- entry points
@@ -852,6 +871,10 @@ def job_summary(job: Job) -> str:
         f"scene       {s.file if s.file else 'no glTF file'}, {len(s.materials)} materials, "
         f"{len(s.objects)} objects, {len(s.lights)} lights, background {_fmt_vec(s.background)}"
     )
+    if s.environment is not None:
+        e = s.environment
+        lines.append(f"  environment {e.file}, strength {e.strength:g}, rotation_z "
+                     f"{e.rotation_z:g} deg")
     for inc in s.includes:
         lines.append(f"  include   {inc}")
     index, groups, _ = worldlines.rest_frame_offsets(list(s.objects))

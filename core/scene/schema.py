@@ -491,12 +491,30 @@ class MotionProfile(Table):
     motion: Motion
 
 
+class Environment(Table):
+    """``scene.environment``: an equirectangular environment map (lab radiance)."""
+
+    what: ClassVar[str] = "in scene.environment"
+    needs: ClassVar[str] = "an environment needs its image file"
+    file: Annotated[Str, AfterValidator(_nonblank)] = Field(
+        description="Equirectangular (lat-long) image, relative to the job: EXR/HDR linear, "
+                    "PNG/JPEG/TIFF sRGB-encoded; texels are linear Rec.709 radiance. Top row "
+                    "+Z, column u along azimuth pi - 2 pi u from +X towards +Y (Blender's "
+                    "Environment Texture).")
+    strength: NonNegative = Field(1.0, description="Radiance scale.")
+    rotation_z: Number = Field(0.0, description="Degrees: turns the map about +Z (adds to "
+                                                "the azimuth).")
+
+
 class Scene(Table):
     """``[scene]``: a glTF file, the sky, included job files."""
 
     file: Str = Field("", description="glTF 2.0 file (.glb / .gltf), relative to the job; "
                                       "objects below are added to it.")
-    background: Colour = Field([0.0, 0.0, 0.0], description="RGB radiance of the sky.")
+    background: Colour = Field([0.0, 0.0, 0.0], description="RGB radiance of the sky "
+                                                            "(0 with an environment).")
+    environment: Environment = Field(None, description="An environment map: replaces the "
+                                                       "background.")
     include: Annotated[list[Str], Field(min_length=1),
                        BeforeValidator(_str_to_list,
                                        json_schema_input_type=Str | list[Str]),
