@@ -40,6 +40,10 @@ Rules across keys (checked here, by hand)
 - **Objects**: ``material`` names a defined material; ``velocity`` is accepted
   (|v| < 1) but must be zero for now; mesh files exist; ``smooth`` is not for glTF.
 - **Lights**: an area light's ``up`` is not parallel to its ``direction``.
+- **Environment**: ``scene.environment`` replaces ``scene.background``, so a non-zero
+  background beside it is an error (key ``scene.background``) rather than one of the two
+  skies being dropped silently; its ``file`` (relative to the job) must be readable here,
+  and is read as an image when the scene is built (:mod:`.sky`).
 - **Include**: ``scene.include = "other.toml"`` (or a list of files), relative to this
   job. Each included file is validated as a complete job (its paths are relative to
   itself, it may include further files, cycles are errors, it may not name a
@@ -70,8 +74,8 @@ from ..files import MAX_TEXT_BYTES, check_readable, read_input, resolve_path
 from ..physics import relativity
 from . import gltf, schema, shapes, worldlines
 from .description import (
-    EnvironmentSpec,
     CameraSettings,
+    EnvironmentSpec,
     Job,
     LightSpec,
     MaterialSpec,

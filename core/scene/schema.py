@@ -1215,7 +1215,8 @@ def markdown() -> str:
         ("[motion]", Motion, ()), ("motion.keyframes entries", Keyframe, ()),
         ("motion.events entries", CameraEvent, ()),
         ("output.view_transform", ViewTransformTable, ()),
-        ("[scene]", Scene, ()), ("[[materials]]", Material, ()),
+        ("[scene]", Scene, ()), ("scene.environment", Environment, ()),
+        ("[[materials]]", Material, ()),
         ("materials.emission_spectrum", Spectrum, ()),
         ("[[objects]], every shape", Object, ()),
     ]
@@ -1266,6 +1267,10 @@ RULES = (
     "`lights`: an area light's `up` is not parallel to its `direction`.",
     "`scene`: `scene.file` or at least one `[[objects]]` entry; included files are "
     "complete jobs without `scene.file`, without cycles.",
+    "`scene.environment` replaces `scene.background`: a non-zero background beside it is "
+    "an error; its file must be readable when the job is read, and an image OpenImageIO "
+    "reads, not empty, with finite values, when the scene is built (before anything is "
+    "written).",
 )
 
 
