@@ -28,6 +28,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import OpenImageIO as oiio
@@ -89,57 +90,78 @@ def render(folder: Path, nee: bool, **kw) -> tuple[np.ndarray, float]:
     return film.resolve(r.to_rgb).rgba[..., :3].astype(np.float64), cpu
 
 
+def rows(width: int, height: int, nee_spp: list[int], bsdf_spp: list[int], ref_spp: int,
+         threads: int, repeats: int, png: Path | None = None) -> list[dict[str, Any]]:
+    """The table: per series and spp the medians over ``repeats`` seeds of the CPU time
+    and the relative MSE against the NEE reference (its row: series "reference")."""
+    ladders = {"nee": nee_spp, "bsdf only": bsdf_spp}
+    common = {"width": width, "height": height, "threads": threads}
+    out: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        write_map(folder / "sky.exr")
+        render(folder, True, spp=1, seed=0, **common)   # compile the kernels
+        load0 = cm.load_average()[0]
+        ref, ref_cpu = render(folder, True, spp=ref_spp, seed=1000, **common)
+        out.append({"series": "reference", "spp": ref_spp, "cpu_s": ref_cpu, "rel_mse": 0.0,
+                    "width": width, "height": height, "threads": threads, "load": load0})
+        for label, nee in (("nee", True), ("bsdf only", False)):
+            for spp in ladders[label]:
+                errs, cpus = [], []
+                for seed in range(repeats):
+                    img, cpu = render(folder, nee, spp=spp, seed=seed, **common)
+                    errs.append(cm.rel_mse(img, ref))
+                    cpus.append(cpu)
+                out.append({"series": label, "spp": spp, "cpu_s": statistics.median(cpus),
+                            "rel_mse": statistics.median(errs), "width": width,
+                            "height": height, "threads": threads,
+                            "load": cm.load_average()[0]})
+            if png is not None:
+                write_png(png / f"env_{label.replace(' ', '_')}.png", img)
+        if png is not None:
+            write_png(png / "env_reference.png", ref)
+    return out
+
+
+def speedups(table: list[dict[str, Any]]) -> list[tuple[float, float, float, bool]]:
+    """(rel. MSE, NEE CPU s, BSDF-only CPU s at that error, extrapolated) per NEE row."""
+    curve = {k: ([r["cpu_s"] for r in table if r["series"] == k],
+                 [r["rel_mse"] for r in table if r["series"] == k])
+             for k in ("nee", "bsdf only")}
+    out = []
+    for t, e in zip(*curve["nee"], strict=True):
+        tb, extra = cm.time_at_error(*curve["bsdf only"], e)
+        if math.isfinite(tb):
+            out.append((e, t, tb, extra))
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", default="96x64")
     ap.add_argument("--spp", default="4,8,16,32,64")
     ap.add_argument("--bsdf-spp", default="16,64,256,1024")
     ap.add_argument("--ref-spp", type=int, default=2048)
-    ap.add_argument("--png", type=Path, default=None)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--png", type=Path, default=None)
     a = ap.parse_args(argv)
     w, h = (int(x) for x in a.size.split("x"))
-    ladders = {"nee": [int(x) for x in a.spp.split(",")],
-               "bsdf only": [int(x) for x in a.bsdf_spp.split(",")]}
-    load0 = cm.load_average()
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        write_map(folder / "sky.exr")
-        common = {"width": w, "height": h, "threads": a.threads}
-        render(folder, True, spp=1, seed=0, **common)   # compile the kernels
-        ref, ref_cpu = render(folder, True, spp=a.ref_spp, seed=1000, **common)
-        rows = []
-        for label, nee in (("nee", True), ("bsdf only", False)):
-            for spp in ladders[label]:
-                errs, cpus = [], []
-                for seed in range(a.repeats):
-                    img, cpu = render(folder, nee, spp=spp, seed=seed, **common)
-                    errs.append(cm.rel_mse(img, ref))
-                    cpus.append(cpu)
-                rows.append({"series": label, "spp": spp, "cpu_s": statistics.median(cpus),
-                             "rel_mse": statistics.median(errs)})
-            if a.png is not None:
-                write_png(a.png / f"env_{label.replace(' ', '_')}.png", img)
-        if a.png is not None:
-            write_png(a.png / "env_reference.png", ref)
-    load1 = cm.load_average()
+    table = rows(w, h, [int(x) for x in a.spp.split(",")],
+                 [int(x) for x in a.bsdf_spp.split(",")], a.ref_spp, a.threads, a.repeats,
+                 a.png)
     print(f"# environment NEE + MIS vs BSDF sampling only ({w}x{h}, max_depth 4, "
-          f"{a.threads} threads, reference {a.ref_spp} spp in {ref_cpu:.1f} CPU s)")
-    print(f"load average before {load0[0]:.2f}, after {load1[0]:.2f}; {cm.cpu_model()}\n")
+          f"{a.threads} threads, reference {a.ref_spp} spp in {table[0]['cpu_s']:.1f} CPU s)")
+    print(f"load average at the start {table[0]['load']:.2f}, at the end "
+          f"{table[-1]['load']:.2f}; {cm.cpu_model()}\n")
     print("| series | spp | CPU s | rel. MSE |")
     print("|---|---|---|---|")
-    for r in rows:
+    for r in table[1:]:
         print(f"| {r['series']} | {r['spp']} | {r['cpu_s']:.2f} | {r['rel_mse']:.4g} |")
-    curve = {k: ([r["cpu_s"] for r in rows if r["series"] == k],
-                 [r["rel_mse"] for r in rows if r["series"] == k]) for k in ladders}
     print()
-    for t, e in zip(*curve["nee"], strict=True):
-        tb, extra = cm.time_at_error(*curve["bsdf only"], e)
-        if math.isfinite(tb):
-            print(f"rel. MSE {e:.4g}: NEE+MIS {t:.2f} CPU s, BSDF only {tb:.2f} CPU s"
-                  f"{' (extrapolated)' if extra else ''}: {tb / t:.1f}x")
-
+    for e, t, tb, extra in speedups(table):
+        print(f"rel. MSE {e:.4g}: NEE+MIS {t:.2f} CPU s, BSDF only {tb:.2f} CPU s"
+              f"{' (extrapolated)' if extra else ''}: {tb / t:.1f}x")
 
 def write_png(path: Path, rgb: np.ndarray) -> None:
     """Linear Rec.709 -> 8-bit sRGB PNG (clipped)."""

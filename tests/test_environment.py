@@ -18,6 +18,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 from render_helpers import (
+    aberrate,
     base_job,
     camera_axes,
     doppler,
@@ -87,13 +88,18 @@ def env_job(tmp_path, rgb_map, **sections):
 # ------------------------------------------------------------------------ orientation
 
 
-@pytest.mark.parametrize("rot", [0.0, 30.0, -20.0])
-def test_marker_appears_where_the_contract_says(tmp_path, rot):
+@pytest.mark.parametrize(("rot", "beta"), [(0.0, 0.0), (30.0, 0.0), (-20.0, 0.0),
+                                           (30.0, 0.6)])
+def test_marker_appears_where_the_contract_says(tmp_path, rot, beta):
     """A one-texel red marker at (u, v) of a 72 × 36 map (5° texels) appears, for a
-    static camera looking along +Y (fov 100°), centred on the pixel of the contract's
-    direction of the texel's centre (within a pixel: the marker spans ~3 pixels); a
-    green marker checks up/down (v) separately. Mirrored u, a wrong origin of φ or
-    rotation_z with the wrong sign move them by tens of pixels."""
+    camera looking along +Y (fov 100°), centred on the pixel of the contract's direction
+    of the texel's centre (within a pixel: the marker spans ~3 pixels); a green marker
+    checks up/down (v) separately. Mirrored u, a wrong origin of φ or rotation_z with
+    the wrong sign move them by tens of pixels. With the camera moving at β = 0.6 along
+    +Y (rgb mode: aberration only) the markers appear at the camera directions whose
+    aberrated lab directions are the texels' (the hand-written aberrate of
+    render_helpers, inverted here with −β and checked): a lookup by the camera-frame
+    direction would leave them where they were at rest, 5–10 pixels away."""
     W, H, fov = 96, 64, 100.0
     m = np.zeros((36, 72, 3))
     r_red, c_red = 21, 15      # v ≈ 0.60, u ≈ 0.215: right of +Y, above the horizon
@@ -102,11 +108,14 @@ def test_marker_appears_where_the_contract_says(tmp_path, rot):
     m[r_grn, c_grn] = (0.0, 1.0, 0.0)
     job = env_job(tmp_path, m, environment={"rotation_z": rot},
                   render={"width": W, "height": H, "spp": 4, "spectral": "rgb"},
-                  camera={"fov": fov}, materials=[GREY], objects=[FAR_SPECK])
+                  camera={"fov": fov}, motion={"beta": [0.0, beta, 0.0]},
+                  materials=[GREY], objects=[FAR_SPECK])
     r = render(job, tmp_path)
     axes = camera_axes([0, 0, 0], [0, 1, 0], [0, 0, 1])
     for ch, (row, col) in ((0, (r_red, c_red)), (1, (r_grn, c_grn))):
-        d = direction_of((col + 0.5) / 72, (row + 0.5) / 36, rot)
+        d_lab = direction_of((col + 0.5) / 72, (row + 0.5) / 36, rot)
+        d = aberrate(d_lab, [0.0, -beta, 0.0])
+        assert np.allclose(aberrate(d, [0.0, beta, 0.0]), d_lab, atol=1e-12)
         right, up, fwd = axes
         x, y = d @ right / (d @ fwd), d @ up / (d @ fwd)
         pc, pr = pixel_to_pixelcoords(x, y, W, H, fov)
