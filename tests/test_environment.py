@@ -330,6 +330,31 @@ def pdf_at(ke, d):
     return environment.env_pdf(ke.pmf, ke.rot, d[0], d[1], d[2])
 
 
+def test_bilinear_lookup_of_the_map_seen_directly():
+    """The directly seen map is bilinear between texel centres: a texel's centre gives
+    that texel, the midpoint between two column centres their mean, u = 0 mixes the
+    last and the first columns (the seam wraps), a row centre's neighbours above the top
+    row's centre clamp to it; the nearest lookup gives the texel the direction is in."""
+    rgb = np.arange(4 * 8 * 3, dtype=np.float64).reshape(4, 8, 3)
+    from relray.core.scene.sky import EnvironmentImage
+    ke = environment.kernel_environment(EnvironmentImage(rgb.astype(np.float32)), "rgb", 0)
+
+    def value(u, v):
+        d = direction_of(u, v)
+        q = environment.env_bilinear(ke.tex, ke.rot, *d)
+        return np.array([environment.env_lane_bilinear(ke.tex, q, j, True, 0.0, 1.0)
+                         for j in range(3)])
+
+    assert np.allclose(value(2.5 / 8, 1.5 / 4), rgb[1, 2], atol=1e-4)
+    assert np.allclose(value(3.0 / 8, 1.5 / 4), 0.5 * (rgb[1, 2] + rgb[1, 3]), atol=1e-4)
+    assert np.allclose(value(1e-9, 2.5 / 4), 0.5 * (rgb[2, 0] + rgb[2, 7]), atol=1e-4)
+    assert np.allclose(value(4.5 / 8, 0.95), rgb[3, 4], atol=1e-4)
+    assert np.allclose(value(4.5 / 8, 0.3 / 4), rgb[0, 4], atol=1e-4)
+    d = direction_of(5.2 / 8, 2.9 / 4)
+    r, c = environment.env_texel(ke.tex, ke.rot, *d)
+    assert (r, c) == (2, 5)
+
+
 # ------------------------------------------------------------------------ job and CLI
 
 

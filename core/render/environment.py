@@ -11,7 +11,12 @@ and back φ = π + ρ − 2πu, θ = π(1 − v): the centre column (u = ½) loo
 (v = 0, :func:`..scene.images.read_image`). Texel (r, c) of an H × W map covers
 v ∈ [r/H, (r+1)/H], u ∈ [c/W, (c+1)/W]; a direction sees the texel it falls in
 (nearest lookup, Blender's "Closest" interpolation): radiance is piecewise constant,
-exactly the density the sampler draws from (below).
+exactly the density the sampler draws from (below). Where no light sampling competes
+— camera rays, and rays after a delta (mirror, glass) bounce, whose MIS weight is 1 —
+the map is interpolated bilinearly between texel centres instead (Blender's "Linear"),
+so a map seen directly or in a mirror shows no texel blocks; that path's estimate is
+unbiased for either lookup, and the light a diffuse or glossy surface receives is the
+nearest map's, which its two techniques (NEE and BSDF sampling) agree on.
 
 Radiance (lab frame): a texel of linear Rec.709 value rgb (× ``strength``; negative
 components clamped to 0) is an RGB emitter (physics.md, "Spectral model"):
@@ -188,6 +193,33 @@ def env_texel(tex, rot, x, y, z):
     h, w = tex.shape[0], tex.shape[1]
     u, v = direction_to_uv(x, y, z, rot)
     return min(int(v * h), h - 1), min(int(u * w), w - 1)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_bilinear(tex, rot, x, y, z):
+    """The 2 × 2 texels around the lab direction (x, y, z) and its weights, for the
+    bilinear lookup of the map seen directly (texel centres at ((c + ½)/W, (r + ½)/H);
+    columns wrap around, rows clamp at the poles): (r0, r1, c0, c1, fy, fx), the value
+    being (1−fy)((1−fx) L[r0,c0] + fx L[r0,c1]) + fy((1−fx) L[r1,c0] + fx L[r1,c1])."""
+    h, w = tex.shape[0], tex.shape[1]
+    u, v = direction_to_uv(x, y, z, rot)
+    cx = u * w - 0.5
+    ry = min(max(v * h - 0.5, 0.0), h - 1.0)
+    c0 = int(math.floor(cx))
+    fx = cx - c0
+    r0 = min(int(ry), h - 1)
+    return r0, min(r0 + 1, h - 1), c0 % w, (c0 + 1) % w, ry - r0, fx
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_lane_bilinear(tex, q, j, rgb, lamu, base):
+    """:func:`env_lane` interpolated over the texels ``q`` of :func:`env_bilinear`."""
+    r0, r1, c0, c1, fy, fx = q
+    a = (1.0 - fx) * env_lane(tex, r0, c0, j, rgb, lamu, base) \
+        + fx * env_lane(tex, r0, c1, j, rgb, lamu, base)
+    b = (1.0 - fx) * env_lane(tex, r1, c0, j, rgb, lamu, base) \
+        + fx * env_lane(tex, r1, c1, j, rgb, lamu, base)
+    return (1.0 - fy) * a + fy * b
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")

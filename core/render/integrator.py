@@ -81,7 +81,9 @@ from .bsdf import (
 )
 from .environment import (
     KernelEnvironment,
+    env_bilinear,
     env_lane,
+    env_lane_bilinear,
     env_light_sample,
     env_pdf,
     env_texel,
@@ -544,11 +546,19 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 if depth > 0 and prev_delta[pi] == 0 and s_sky_pmf > 0.0:
                     w = power_heuristic(prev_pdf[pi],
                                         s_sky_pmf * env_pdf(s_env_pmf, s_env_rot, dx, dy, dz))
-                r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
-                for j in range(nlanes):
-                    L[pi, j] += thr[pi, j] * w * env_lane(
-                        s_env_tex, r_e, c_e, j, rgb_lanes, lamu[pi, j],
-                        lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
+                if prev_delta[pi] == 1:  # seen directly or through a delta bounce:
+                    # bilinear (no light sampling to agree with; environment.py)
+                    q_e = env_bilinear(s_env_tex, s_env_rot, dx, dy, dz)
+                    for j in range(nlanes):
+                        L[pi, j] += thr[pi, j] * env_lane_bilinear(
+                            s_env_tex, q_e, j, rgb_lanes, lamu[pi, j],
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
+                else:
+                    r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
+                    for j in range(nlanes):
+                        L[pi, j] += thr[pi, j] * w * env_lane(
+                            s_env_tex, r_e, c_e, j, rgb_lanes, lamu[pi, j],
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
