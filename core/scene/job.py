@@ -102,7 +102,6 @@ from .schema import (  # noqa: F401  (the limits are part of this module's API)
     MIN_BAND_STEP_NM,
     MIN_LINE_SIGMA_REL,
     ROTATION_TOL,
-    SENSOR_RANGE_NM,
     given,
 )
 from .view_transform import ocio_problem

@@ -66,6 +66,7 @@ from pydantic.fields import FieldInfo
 from pydantic_core import PydanticCustomError
 
 from ..errors import UserError
+from ..physics.spectrum import BANDS_RANGE_NM
 from . import shapes
 from .description import (
     AOV_NAMES,
@@ -102,7 +103,6 @@ LINE_RANGE_NM = (1.0, 1.0e5)
 MIN_LINE_SIGMA_REL = 1e-6
 #: Narrowest spectral band (nm): keeps the band count, and the film, bounded.
 MIN_BAND_STEP_NM = 0.1
-SENSOR_RANGE_NM = (360.0, 830.0)
 #: Tolerance of the orthonormality check of camera rotations and matrices.
 ROTATION_TOL = 1e-4
 DEFAULT_CAMERA_POSITION = (0.0, -3.9, 1.0)
@@ -234,13 +234,13 @@ def _frames_rule(v: list[int]) -> list[int]:
 
 def _bands_rule(v: list[float]) -> list[float]:
     start, stop, step = v
-    lo, hi = SENSOR_RANGE_NM
+    lo, hi = BANDS_RANGE_NM
     if step < MIN_BAND_STEP_NM:
         raise _fail(f"step must be >= {MIN_BAND_STEP_NM:g} nm (got {step:g})")
     if start >= stop:
         raise _fail(f"start {start:g} must be below stop {stop:g}")
-    if start < lo or stop > hi:
-        raise _fail(f"bands must lie within {lo:g}..{hi:g} nm")
+    if start - step / 2 < lo or stop + step / 2 > hi:
+        raise _fail(f"bands (with their half steps) must lie within {lo:g}..{hi:g} nm")
     n = (stop - start) / step
     if abs(n - round(n)) > 1e-6 * max(1.0, n):
         raise _fail("stop - start must be a whole number of steps")
@@ -394,8 +394,9 @@ class Output(Table):
                                     "Repeats are dropped.")
     spectral_bands: _vec(3, Number, AfterValidator(_bands_rule),
                          expect="an array of 3 numbers (start, stop, step)") = Field(
-        [380.0, 780.0, 10.0], description="nm: start, stop, step of the spectral-exr bands; "
-                                          "inside 360..830, step ≥ 0.1, whole steps.")
+        [380.0, 780.0, 10.0], description="nm: start, stop, step of the spectral-exr bands "
+                                          "(camera frame); with their half steps inside "
+                                          "100..10000 (UV to IR), step ≥ 0.1, whole steps.")
     aovs: Annotated[list[_choice(AOV_NAMES)], Expect("an array of strings")] = Field(
         list(DEFAULT_AOVS), description="Extra EXR layers (Depth.Z, Doppler.D, LabTime.T, "
                                         "Albedo.R/G/B, Normal.X/Y/Z: the denoising albedo "
