@@ -85,7 +85,7 @@ def temperature_from_bv(bv: np.ndarray | float) -> np.ndarray:
 
         T = 4600 K (1/(0.92 (B−V) + 1.7) + 1/(0.92 (B−V) + 0.62)),
 
-    B−V clamped to [BV_MIN, BV_MAX]. The Sun (B−V = 0.65) gives 5720 K, Vega (0.0) 10126 K.
+    B−V clamped to [BV_MIN, BV_MAX]. The Sun (B−V = 0.65) gives 5778 K, Vega (0.0) 10125 K.
     """
     x = np.clip(np.asarray(bv, np.float64), BV_MIN, BV_MAX)
     return 4600.0 * (1.0 / (0.92 * x + 1.7) + 1.0 / (0.92 * x + 0.62))

@@ -102,12 +102,14 @@ Clamp (``render.clamp`` = C > 0; Cycles' "Clamp Direct/Indirect")
     default) skips it: the film then sees bit-identical samples.
 
 Sample-free layer (the stars, core/render/starfield.py)
-    ``layer_sensor[p, c]`` and ``layer_band[p, b]`` hold radiance that no path sample
-    carries (sensor values and mean band radiance, as a pixel's mean would be): it is
-    computed once per frame by :meth:`add_layer` and added to the pixel's mean on
-    :meth:`Film.resolve` (``rgb = M · (m + layer)``). It is not clamped and is no part
-    of the noise estimates or ``spp``. A frame split into sample batches carries it in the
-    batch that starts at sample 0 only, so :meth:`Film.merge` simply adds it.
+    Radiance that no path sample carries, computed once per frame: :meth:`add_layer`
+    keeps a sparse list of splats, ``layer_pixel[k]``, ``layer_sensor[k, c]`` (sensor
+    values) and ``layer_band[k, b]`` (mean band radiance), as a pixel's mean would be
+    (memory in proportion to the splats, not to the image). :meth:`Film.resolve` adds
+    their per-pixel sums (:meth:`Film.layer_sums`) to the pixels' means
+    (``rgb = M · (m + layer)``). The layer is not clamped and is no part of the noise
+    estimates or ``spp``. A frame split into sample batches carries it in the batch that
+    starts at sample 0 only, so :meth:`Film.merge` simply appends the other's splats.
 
 Finite outputs
     A sample with any non-finite value (sensor, alpha, an AOV, a hero wavelength or lane
@@ -335,8 +337,9 @@ class Film:
         self.sum_aov = np.zeros((n, col), np.float64)
         self.count = np.zeros(n, np.int64)
         self.sum_band = np.zeros((n, nb), np.float64)
-        self.layer_sensor = np.zeros((n, 3), np.float64)
-        self.layer_band = np.zeros((n, nb), np.float64)
+        self.layer_pixel = np.zeros(0, np.int64)
+        self.layer_sensor = np.zeros((0, 3), np.float64)
+        self.layer_band = np.zeros((0, nb), np.float64)
         self.nonfinite_samples = 0
         """Samples dropped by :meth:`add_samples` because a value was non-finite."""
 
@@ -452,9 +455,20 @@ class Film:
             band = np.asarray(bands, np.float64).reshape(len(pixel), self.num_bands)
             ok &= np.isfinite(band).all(axis=1)
         self.nonfinite_samples += int(np.count_nonzero(~ok))
-        np.add.at(self.layer_sensor, pixel[ok], sensor[ok])
+        self.layer_pixel = np.concatenate([self.layer_pixel, pixel[ok]])
+        self.layer_sensor = np.concatenate([self.layer_sensor, sensor[ok]])
         if band is not None:
-            np.add.at(self.layer_band, pixel[ok], band[ok])
+            self.layer_band = np.concatenate([self.layer_band, band[ok]])
+
+    def layer_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        """The sample-free layer per pixel: sensor values (num_pixels, 3) and band
+        radiance (num_pixels, nb), float64 (splats in one pixel add up, in order)."""
+        sensor = np.zeros((self.num_pixels, 3))
+        band = np.zeros((self.num_pixels, self.num_bands))
+        np.add.at(sensor, self.layer_pixel, self.layer_sensor)
+        if self.num_bands:
+            np.add.at(band, self.layer_pixel, self.layer_band)
+        return sensor, band
 
     def _stack_aovs(
         self, aov: dict[str, np.ndarray] | None, n_in: int, dtype: np.dtype
@@ -488,8 +502,9 @@ class Film:
         self.sum_aov += other.sum_aov
         self.count += other.count
         self.sum_band += other.sum_band
-        self.layer_sensor += other.layer_sensor
-        self.layer_band += other.layer_band
+        self.layer_pixel = np.concatenate([self.layer_pixel, other.layer_pixel])
+        self.layer_sensor = np.concatenate([self.layer_sensor, other.layer_sensor])
+        self.layer_band = np.concatenate([self.layer_band, other.layer_band])
         self.nonfinite_samples += other.nonfinite_samples
 
     # ------------------------------------------------------------------ resolving
@@ -568,8 +583,9 @@ class Film:
                 out[nf] = 0.0
             return out
 
+        layer_sensor, layer_band = self.layer_sums()
         with np.errstate(over="ignore", invalid="ignore"):
-            rgb = (self._mean(self.sum_sensor) + self.layer_sensor) @ m.T  # (n, 3)
+            rgb = (self._mean(self.sum_sensor) + layer_sensor) @ m.T  # (n, 3)
         rgba = np.empty((h, w, 4), np.float32)
         rgba[..., :3] = finite32(rgb.reshape(h, w, 3))
         rgba[..., 3] = finite32(self._mean(self.sum_alpha).reshape(h, w))
@@ -582,7 +598,7 @@ class Film:
         spectral = None
         if self.num_bands:
             step = self.bands[2]
-            spectral = finite32((self._mean(self.sum_band) / step + self.layer_band)
+            spectral = finite32((self._mean(self.sum_band) / step + layer_band)
                                 .reshape(h, w, self.num_bands))
         if bad:
             log.warning("%d output values exceed float32's range (3.4e38) and were set to 0",
