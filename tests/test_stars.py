@@ -281,6 +281,25 @@ def test_frame_stars_occlusion_batches_and_transparency(tmp_path):
     assert len(clear.layer_pixel) == 0
 
 
+def test_rgb_mode_draws_the_lab_colour_times_the_aberrated_solid_angle(tmp_path):
+    """spectral = "rgb": no wavelength shift, no D⁵; the star is its lab colour × Ω/D²
+    (star A, 5° right of the view axis, seen from a camera at β = 0.2 x̂)."""
+    field = two_stars()
+    b = 0.2
+    renderer, film = render_with_stars(tmp_path, field, b=b, render_extra='spectral = "rgb"')
+    assert renderer.rgb_mode
+    sp = star_splats(field, renderer.camera, np.array([b, 0, 0]), mode="rgb")
+    layer = film.layer_sums()[0]
+    drawn = np.flatnonzero(layer.any(axis=1))
+    assert len(drawn) == 1 and drawn[0] == sp.pixel[0]  # A; B stays behind the box
+    D = (1 + b * math.sin(math.radians(5))) / math.sqrt(1 - b * b)  # γ (1 + β·n)
+    assert sp.doppler[0] == pytest.approx(D, rel=1e-12)
+    omega_px = renderer.camera.pixel_solid_angle(sp.col[:1], sp.row[:1])[0]
+    lab_rgb = spectrum.sensor_to_rgb("cie1931") @ xyz_of(lambda lam: planck_nm(lam, 5800.0))
+    np.testing.assert_allclose(layer[drawn[0]] * omega_px, field.omega[0] / D**2 * lab_rgb,
+                               rtol=1e-9)
+
+
 def test_moving_box_hides_the_star_where_it_is(tmp_path):
     """A box moving at 0.5 c along x, at x = -5 at lab time 0: the star behind x = 0
     is hidden only when the box is there as the light passes (lab time −10 at y = 10:

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import functools
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -126,8 +127,8 @@ def hipparcos() -> StarCatalogue:
     try:
         with np.load(cache) as z:
             return StarCatalogue(**{k: z[k] for k in COLUMNS})
-    except (OSError, KeyError, ValueError):
-        pass
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
+        pass  # missing or damaged: parse the text again and rewrite it
     cat = parse_hip2(path)
     try:
         cache.parent.mkdir(parents=True, exist_ok=True)
