@@ -62,7 +62,10 @@ Planck values rather than the float32 grid tables.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from . import spectrum
 
@@ -74,8 +77,6 @@ BV_MIN = -0.4
 BV_MAX = 5.5
 #: Luminous flux (CIE Y × sr, the renderer's units) of a magnitude-0 star at brightness 1.
 ZERO_POINT_Y = 2.5e-4
-#: Stars are computed in chunks of this many (bounds the (stars × wavelengths) arrays).
-CHUNK = 4096
 #: Gauss–Legendre nodes on [-1, 1] and weights of the spectral-band averages.
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(4)
 
@@ -96,14 +97,45 @@ def luminous_flux(magnitude: np.ndarray | float, brightness: float = 1.0) -> np.
     return brightness * ZERO_POINT_Y * 10.0 ** (-0.4 * np.asarray(magnitude, np.float64))
 
 
-def _planck_rows(lam_nm: np.ndarray, temperature: np.ndarray) -> np.ndarray:
-    """B(λ, T) (W·m⁻²·sr⁻¹·nm⁻¹) for each T (rows) at each λ (columns), float64;
-    exactly 0 where the exponential overflows (no warning)."""
-    lam = np.asarray(lam_nm, np.float64)
-    t = np.asarray(temperature, np.float64)[..., None]
-    with np.errstate(over="ignore", divide="ignore"):
-        x = spectrum._C2_NM_K / (lam * t)
-        return spectrum._C1 / (lam * 1e-9) ** 5 / np.expm1(x) * 1e-9
+#: Planck's law per nm with λ in nm: B = _C1_NM / (λ⁵ (e^{c2/(λT)} − 1)), W·m⁻²·sr⁻¹·nm⁻¹.
+_C1_NM = spectrum._C1 * 1e36
+_C2_NM_K = spectrum._C2_NM_K
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _planck(lam_nm, T):
+    """B_λ(λ, T) (W·m⁻²·sr⁻¹·nm⁻¹), as :func:`spectrum.planck`; 0 where e^x overflows."""
+    x = _C2_NM_K / (lam_nm * T)
+    if x > 709.0:
+        return 0.0
+    l2 = lam_nm * lam_nm
+    return _C1_NM / (l2 * l2 * lam_nm * math.expm1(x))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _weighted_planck(lam, w, scale, temp, out):  # pragma: no cover - compiled
+    """out[i, c] = Σ_j w[c, j] B(scale[i] λ_j, temp[i]) (quadrature rows w over λ)."""
+    for i in range(out.shape[0]):
+        s, t = scale[i], temp[i]
+        for c in range(w.shape[0]):
+            out[i, c] = 0.0
+        for j in range(lam.shape[0]):
+            b = _planck(s * lam[j], t)
+            if b != 0.0:
+                for c in range(w.shape[0]):
+                    out[i, c] += w[c, j] * b
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _grouped_planck(lam, w, scale, temp, out):  # pragma: no cover - compiled
+    """out[i, g] = Σ_k w[k] B(scale[i] λ[g, k], temp[i]) (one quadrature per group g)."""
+    for i in range(out.shape[0]):
+        s, t = scale[i], temp[i]
+        for g in range(lam.shape[0]):
+            acc = 0.0
+            for k in range(lam.shape[1]):
+                acc += w[k] * _planck(s * lam[g, k], t)
+            out[i, g] = acc
 
 
 def _sensor_rows(mode: str) -> np.ndarray:
@@ -114,11 +146,11 @@ def _sensor_rows(mode: str) -> np.ndarray:
 def lab_solid_angle(magnitude: np.ndarray, temperature: np.ndarray,
                     brightness: float = 1.0) -> np.ndarray:
     """Ω (sr) with Y[Ω B(·, T)] = :func:`luminous_flux` (m): the lab flux is Ω·B(λ, T)."""
-    w_y = _sensor_rows("cie1931")[1]
-    y = np.concatenate([_planck_rows(spectrum.sensor_nm(), t) @ w_y
-                        for t in np.array_split(np.atleast_1d(temperature),
-                                                max(1, -(-np.size(temperature) // CHUNK)))])
-    return luminous_flux(magnitude, brightness) / y.reshape(np.shape(temperature))
+    t = np.ascontiguousarray(np.atleast_1d(temperature), np.float64)
+    y = np.empty((len(t), 1))
+    _weighted_planck(spectrum.sensor_nm(), _sensor_rows("cie1931")[1:2].copy(),
+                     np.ones(len(t)), t, y)
+    return luminous_flux(magnitude, brightness) / y[:, 0].reshape(np.shape(temperature))
 
 
 def camera_factors(D: np.ndarray, doppler: bool, searchlight: bool
@@ -139,19 +171,13 @@ def sensor_flux(omega: np.ndarray, temperature: np.ndarray, D: np.ndarray, mode:
     ``temperature``, ``D``: (N,) lab solid angle, lab temperature, Doppler factor.
     """
     omega = np.asarray(omega, np.float64)
-    temperature = np.asarray(temperature, np.float64)
-    n = omega.shape[0]
-    rows = _sensor_rows(mode)
-    lam = spectrum.sensor_nm()
-    out = np.empty((n, 3))
     rgb = mode == "rgb"
     k, s = camera_factors(D, doppler and not rgb, searchlight and not rgb)
-    if rgb:
-        k = 1.0 / np.asarray(D, np.float64) ** 2
-    for a in range(0, n, CHUNK):
-        b = min(n, a + CHUNK)
-        spec = _planck_rows(lam[None, :] * s[a:b, None], temperature[a:b])
-        out[a:b] = (spec @ rows.T) * (k[a:b] * omega[a:b])[:, None]
+    out = np.empty((len(omega), 3))
+    _weighted_planck(spectrum.sensor_nm(), np.ascontiguousarray(_sensor_rows(mode)),
+                     np.ascontiguousarray(s, np.float64),
+                     np.ascontiguousarray(temperature, np.float64), out)
+    out *= (k * omega)[:, None]
     if rgb:
         out = out @ spectrum.sensor_to_rgb("cie1931").T
     return out
@@ -163,16 +189,11 @@ def band_flux(omega: np.ndarray, temperature: np.ndarray, D: np.ndarray,
     """Mean camera-frame flux over each spectral band, (N, nb):
     (1/Δ) ∫_{λ_b − Δ/2}^{λ_b + Δ/2} F_cam(λ) dλ by 4-point Gauss–Legendre per band."""
     omega = np.asarray(omega, np.float64)
-    temperature = np.asarray(temperature, np.float64)
-    n = omega.shape[0]
-    lam = (np.asarray(centers_nm, np.float64)[:, None]
-           + 0.5 * float(step_nm) * _GL_X[None, :]).ravel()
+    lam = np.ascontiguousarray(np.asarray(centers_nm, np.float64)[:, None]
+                               + 0.5 * float(step_nm) * _GL_X[None, :])
     k, s = camera_factors(D, doppler, searchlight)
-    nb = len(centers_nm)
-    out = np.empty((n, nb))
-    for a in range(0, n, CHUNK):
-        b = min(n, a + CHUNK)
-        spec = _planck_rows(lam[None, :] * s[a:b, None], temperature[a:b])
-        out[a:b] = (spec.reshape(b - a, nb, len(_GL_W)) @ (0.5 * _GL_W)) \
-            * (k[a:b] * omega[a:b])[:, None]
+    out = np.empty((len(omega), len(lam)))
+    _grouped_planck(lam, 0.5 * _GL_W, np.ascontiguousarray(s, np.float64),
+                    np.ascontiguousarray(temperature, np.float64), out)
+    out *= (k * omega)[:, None]
     return out
