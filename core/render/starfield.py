@@ -12,7 +12,9 @@ sampling, every star is
 3. tested for occlusion: the lab ray from the shutter event along n against the
    scene's accelerator (the static BVH, or :meth:`.rest_frames.MovingScene.occluded`
    with the ray's lab event, so moving bodies hide stars where they are when the light
-   passes); the area lights' quads are no geometry and hide nothing;
+   passes); any geometry hides a star, glass too (stars are not traced through
+   transmissive surfaces, nor seen in mirrors: they reach the camera only directly);
+   the area lights' quads are no geometry and hide nothing;
 4. given its camera-frame flux F_cam(λ) = (Ω/D²) B(λ, D T) through the sensor
    (:func:`..physics.starlight.sensor_flux`, which also documents what ``doppler``,
    ``searchlight`` and ``spectral = "rgb"`` do to it) and, when the job writes
