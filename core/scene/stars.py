@@ -24,10 +24,13 @@ Parsing the text takes about 0.3 s, so the parsed columns are cached as an ``.np
 under :func:`relray.core.user_cache_dir` (keyed by the file's size and mtime), and
 memoised per process.
 
-Stars light nothing: they only appear where the camera sees the sky. All the stars of
-the sky give an illuminance of about 1e-9 of daylight's; in the renderer's units that
-is far below any scene's noise, and sampling 40,000 point lights per bounce would cost
-much more than it could ever show.
+Stars light nothing: they only appear where the camera sees the sky directly. The
+scene is lit in the lab (or in a moving body's rest frame), where the stars are as faint
+as at rest: the D² gain of starlight ahead is the moving camera's alone. At
+brightness 1 the whole catalogue's luminous flux is 0.036 (renderer units × sr), so the
+stars above a horizontal plane light it with about 0.3 % of the illuminance of a
+luminance-1 sky (and the real night sky is ~1e-8 of daylight); sampling 40,000 point
+lights per bounce would cost far more than that could show.
 """
 
 from __future__ import annotations
