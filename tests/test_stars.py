@@ -21,7 +21,8 @@ from relray.core.physics import spectrum, starlight
 from relray.core.physics.relativity import snapshot_event
 from relray.core.render.camera import PinholeCamera
 from relray.core.render.frames import build_renderer
-from relray.core.render.starfield import star_splats
+from relray.core.render.accel import Accel
+from relray.core.render.starfield import occlusion_test, star_splats
 from relray.core.scene import stars
 from relray.core.scene.description import StarsSettings
 from relray.core.scene.geometry import build_scene
@@ -394,3 +395,16 @@ def test_an_included_job_may_not_set_stars(tmp_path, capsys):
     assert cli.main(["info", str(main)]) == 2
     err = capsys.readouterr().err
     assert "scene.include" in err and "scene.stars" in err and str(main) in err
+
+
+def test_a_far_camera_sees_the_box_hide_the_star():
+    """Seen from 1e6 units away (outside the scene's bounding sphere) the box still hides
+    the star behind it, and stars whose rays miss the scene are not traced at all."""
+    box = np.array([[[-1, 1e6 + 9, -1], [1, 1e6 + 9, -1], [0, 1e6 + 9, 1]]], float)
+    accel = Accel(box)
+    ev = snapshot_event(np.zeros(3), np.zeros(3), 0.0)
+    blocked = occlusion_test(accel, accel.origin, 2.0, ev)
+    d = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0],
+                  [2e-7, 1.0, 0.0]])
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    assert blocked(d).tolist() == [True, False, False, True]

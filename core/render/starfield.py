@@ -101,27 +101,39 @@ def occlusion_test(tracer: Accel | MovingScene | None, origin: np.ndarray, radiu
                    event: relativity.ShutterEvent) -> Callable[[np.ndarray], np.ndarray]:
     """``blocked`` for :func:`star_splats`: True where the lab ray from the shutter event
     along a direction hits geometry (``tracer``, its accelerator coordinates about the lab
-    point ``origin``). A static scene's rays start where they enter its bounding sphere of
-    ``radius`` (float64, as the primary rays do), so a far camera keeps its precision."""
+    point ``origin``). For a static scene (a finite bounding sphere of ``radius``) seen
+    from outside, a ray that misses the sphere is free without a trace, and the others
+    start where they enter it (float64, as the primary rays do), so a far camera keeps
+    its precision."""
     x0 = np.asarray(event.x, np.float64) - np.asarray(origin, np.float64)
 
     def blocked(d: np.ndarray) -> np.ndarray:
         n = len(d)
+        out = np.zeros(n, bool)
         if tracer is None or n == 0:
-            return np.zeros(n, bool)
+            return out
+        rows = np.arange(n)
         t_in = np.zeros(n)
         c = float(x0 @ x0) - radius * radius
         if math.isfinite(radius) and c > 0.0:
             b = d @ x0
             perp = x0[None, :] - b[:, None] * d
             disc = radius * radius - np.einsum("ij,ij->i", perp, perp)
-            hits = disc > 0.0
-            t_in[hits] = np.maximum(0.0, -b[hits] - np.sqrt(disc[hits]))
-        o = np.ascontiguousarray(x0[None, :] + t_in[:, None] * d, np.float32)
-        dirs = np.ascontiguousarray(d, np.float32)
-        tmax = np.full(n, MISS_DISTANCE, np.float32)
+            root = np.sqrt(np.maximum(disc, 0.0))
+            reach = (disc > 0.0) & (root - b > 0.0)  # the sphere is crossed ahead
+            rows, b, root = rows[reach], b[reach], root[reach]
+            t_in = np.maximum(0.0, -b - root)
+        if len(rows) == 0:
+            return out
+        dr = d[rows]
+        o = np.ascontiguousarray(x0[None, :] + t_in[:, None] * dr, np.float32)
+        dirs = np.ascontiguousarray(dr, np.float32)
+        tmax = np.full(len(rows), MISS_DISTANCE, np.float32)
         if isinstance(tracer, MovingScene):
-            return np.asarray(tracer.occluded(o, dirs, tmax, float(event.t) - t_in), bool)
-        return np.asarray(tracer.occluded(o, dirs, tmax), bool)
+            hit = tracer.occluded(o, dirs, tmax, float(event.t) - t_in)
+        else:
+            hit = tracer.occluded(o, dirs, tmax)
+        out[rows] = np.asarray(hit, bool)
+        return out
 
     return blocked
