@@ -19,9 +19,9 @@ from relray.core import cli
 from relray.core.output.digest import job_digest
 from relray.core.physics import spectrum, starlight
 from relray.core.physics.relativity import snapshot_event
+from relray.core.render.accel import Accel
 from relray.core.render.camera import PinholeCamera
 from relray.core.render.frames import build_renderer
-from relray.core.render.accel import Accel
 from relray.core.render.starfield import occlusion_test, star_splats
 from relray.core.scene import stars
 from relray.core.scene.description import StarsSettings
