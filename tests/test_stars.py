@@ -408,3 +408,18 @@ def test_a_far_camera_sees_the_box_hide_the_star():
                   [2e-7, 1.0, 0.0]])
     d /= np.linalg.norm(d, axis=1)[:, None]
     assert blocked(d).tolist() == [True, False, False, True]
+
+
+@pytest.mark.parametrize(("view", "table"), [("ahead", 10046), ("behind", 3349)])
+def test_physics_md_blackbody_case(view, table):
+    """physics.md's table: a 5800 K blackbody straight ahead / behind at β = 0.5 has the
+    colour of a 10046 K / 3349 K blackbody (D = √3, 1/√3; the table rounds D·T)."""
+    sign = 1.0 if view == "ahead" else -1.0
+    T_seen = 5800.0 * math.sqrt(3.0) ** sign
+    assert round(T_seen) == table
+    cam = camera_looking((sign, 0, 0))
+    star = one_star([sign, 0, 1e-9], 5800.0)
+    sp = star_splats(star, cam, np.array([0.5, 0, 0]), mode="cie1931")
+    xyz = sp.sensor[0]
+    bb = xyz_of(lambda lam: planck_nm(lam, T_seen))
+    np.testing.assert_allclose(xyz[:2] / xyz.sum(), bb[:2] / bb.sum(), rtol=1e-9)
