@@ -24,7 +24,7 @@ luminous flux, CIE 1931 Y of F_lab in the renderer's units (the units in which a
 so Ω = Y_lab / Y[B(·, T)]. A magnitude-0 star carries the luminous flux of a patch of
 luminance-1 sky of 2.5e-4 sr (a disc of 0.9° radius). Drawn into a pixel of solid angle
 Ω_px it adds the radiance Y/Ω_px: a 256-pixel-high image with a 40° field has
-Ω_px ≈ 7.6e-6 sr, so at the default exposure (0 stops, radiance 1 = white) a
+Ω_px ≈ 8.1e-6 sr, so at the default exposure (0 stops, radiance 1 = white) a
 magnitude-8 star adds Y ≈ 0.02 (a faint grey dot, sRGB ~ 40/255), magnitude 4 Y ≈ 0.8
 and everything brighter than about magnitude 3.7 is white. ``brightness`` multiplies
 every star's flux (1 = the zero point above).
