@@ -78,6 +78,7 @@ from ..errors import UserError
 from . import gltf, shapes, worldlines
 from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
 from .footprint import check_memory
+from .stars import StarField, star_field
 from .worldlines import VelocityGroup
 
 log = logging.getLogger("relray")
@@ -112,6 +113,8 @@ class Scene:
     # the area lights' quads: the last ``light_triangles`` of the static triangles,
     # triangles[n_geometry:n_static]; lights, not geometry (no BVH: no shadow, no back)
     light_triangles: int = 0
+    # the sky's stars (``scene.stars``, core/scene/stars.py), None without any
+    stars: StarField | None = None
 
     @property
     def n_static(self) -> int:
@@ -331,10 +334,13 @@ def build_scene(job: Job) -> Scene:
     if groups:
         tri_group = np.concatenate([np.full(len(p.triangles), p.group, np.int32)
                                     for p in parts])
-    return scene_from_parts(triangles, normals, material_ids, materials,
-                            [*lights, *job.scene.lights], job.scene.background, camera,
-                            file=job.path, named_parts=named, tri_group=tri_group,
-                            groups=tuple(groups))
+    scene = scene_from_parts(triangles, normals, material_ids, materials,
+                             [*lights, *job.scene.lights], job.scene.background, camera,
+                             file=job.path, named_parts=named, tri_group=tri_group,
+                             groups=tuple(groups))
+    if job.scene.stars is not None:
+        scene.stars = star_field(job.scene.stars)
+    return scene
 
 
 def _gltf_parts(gl: gltf.GltfScene, group_of: Sequence[int],

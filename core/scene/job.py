@@ -79,6 +79,7 @@ from .description import (
     OutputSettings,
     RenderSettings,
     SceneSpec,
+    StarsSettings,
     ViewTransform,
     Worldline,
     frozen,
@@ -104,6 +105,7 @@ from .schema import (  # noqa: F401  (the limits are part of this module's API)
     ROTATION_TOL,
     given,
 )
+from .stars import star_count
 from .view_transform import ocio_problem
 
 # ------------------------------------------------------------- cross-key errors
@@ -578,6 +580,9 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         if inc.scene.file is not None:
             raise sctx.error("include", f"{inc_path} names a scene.file; only the including "
                              "job may name a glTF file")
+        if inc.scene.stars is not None:
+            raise sctx.error("include", f"{inc_path} sets scene.stars; only the including "
+                             "job may set the sky's stars")
         for m in inc.scene.materials:
             if m.name in origin:
                 raise sctx.error("include", f"material '{m.name}' of {inc_path} is already "
@@ -612,7 +617,16 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         objects=tuple(objects),
         lights=tuple(lights),
         includes=tuple(includes),
+        stars=_stars(s.stars),
     )
+
+
+def _stars(st: schema.Stars | None) -> StarsSettings | None:
+    """``scene.stars`` (every rule is the key's own, checked by the schema)."""
+    if st is None:
+        return None
+    return StarsSettings(catalog=st.catalog, magnitude_limit=float(st.magnitude_limit),
+                         brightness=float(st.brightness))
 
 
 # -------------------------------------------------------------------- entry points
@@ -851,6 +865,10 @@ def job_summary(job: Job) -> str:
         f"scene       {s.file if s.file else 'no glTF file'}, {len(s.materials)} materials, "
         f"{len(s.objects)} objects, {len(s.lights)} lights, background {_fmt_vec(s.background)}"
     )
+    if s.stars is not None:
+        st = s.stars
+        lines.append(f"  stars     {star_count(st)} of the {st.catalog} catalogue to magnitude "
+                     f"{st.magnitude_limit:g}, brightness {st.brightness:g}")
     for inc in s.includes:
         lines.append(f"  include   {inc}")
     index, groups, _ = worldlines.rest_frame_offsets(list(s.objects))

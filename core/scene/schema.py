@@ -79,6 +79,7 @@ from .description import (
     OUTPUT_FORMATS,
     SHAPES,
     SPECTRAL_MODES,
+    STAR_CATALOGUES,
 )
 
 # ----------------------------------------------------------------------- limits
@@ -492,6 +493,21 @@ class MotionProfile(Table):
     motion: Motion
 
 
+class Stars(Table):
+    """``scene.stars``: the stars of a catalogue, point sources at infinity in the lab."""
+
+    catalog: _choice(STAR_CATALOGUES) = Field(
+        "hipparcos", description="Star catalogue: hipparcos (ESA Hipparcos-2, 117,955 "
+                                 "stars; equatorial axes: +Z north pole, +X towards RA 0h, "
+                                 "+Y towards 6h).")
+    magnitude_limit: Annotated[Number, Field(ge=-30.0, le=30.0)] = Field(
+        8.0, description="Drop stars fainter than this magnitude (as seen at rest); 8 keeps "
+                         "about 37,600 stars, 6 (the naked eye) about 4,600.")
+    brightness: NonNegative = Field(
+        1.0, description="Scales every star's flux; at 1 a magnitude-0 star carries the "
+                         "luminous flux of 2.5e-4 sr of luminance-1 sky (physics.md).")
+
+
 class Scene(Table):
     """``[scene]``: a glTF file, the sky, included job files."""
 
@@ -507,6 +523,10 @@ class Scene(Table):
                        Expect("a file name or an array of file names")] = Field(
         None, description="Job files (.toml, relative to this one) whose materials, objects "
                           "and lights come first; no cycles, no scene.file in them.")
+    stars: Stars = Field(
+        None, description="Stars of a catalogue, drawn as sharp points where the camera "
+                          "sees the sky (aberrated, Doppler-shifted and beamed); they light "
+                          "nothing. Absent: no stars.")
 
 
 class Spectrum(Table):
@@ -1198,7 +1218,7 @@ def markdown() -> str:
         ("[motion]", Motion, ()), ("motion.keyframes entries", Keyframe, ()),
         ("motion.events entries", CameraEvent, ()),
         ("output.view_transform", ViewTransformTable, ()),
-        ("[scene]", Scene, ()), ("[[materials]]", Material, ()),
+        ("[scene]", Scene, ()), ("scene.stars", Stars, ()), ("[[materials]]", Material, ()),
         ("materials.emission_spectrum", Spectrum, ()),
         ("[[objects]], every shape", Object, ()),
     ]
@@ -1248,7 +1268,7 @@ RULES = (
     "scene files exist and have a known suffix; `smooth` is not for glTF meshes.",
     "`lights`: an area light's `up` is not parallel to its `direction`.",
     "`scene`: `scene.file` or at least one `[[objects]]` entry; included files are "
-    "complete jobs without `scene.file`, without cycles.",
+    "complete jobs without `scene.file` and without `scene.stars`, without cycles.",
 )
 
 
