@@ -79,6 +79,7 @@ from . import gltf, shapes, worldlines
 from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
 from .footprint import check_memory
 from .sky import EnvironmentImage, load_environment
+from .stars import StarField, star_field
 from .worldlines import VelocityGroup
 
 log = logging.getLogger("relray")
@@ -113,6 +114,8 @@ class Scene:
     # the area lights' quads: the last ``light_triangles`` of the static triangles,
     # triangles[n_geometry:n_static]; lights, not geometry (no BVH: no shadow, no back)
     light_triangles: int = 0
+    # the sky's stars (``scene.stars``, core/scene/stars.py), None without any
+    stars: StarField | None = None
     # the environment map (scene.environment, read by sky.load_environment), or None
     environment: EnvironmentImage | None = None
 
@@ -334,11 +337,14 @@ def build_scene(job: Job) -> Scene:
     if groups:
         tri_group = np.concatenate([np.full(len(p.triangles), p.group, np.int32)
                                     for p in parts])
-    return scene_from_parts(triangles, normals, material_ids, materials,
-                            [*lights, *job.scene.lights], job.scene.background, camera,
-                            file=job.path, named_parts=named, tri_group=tri_group,
-                            groups=tuple(groups),
-                            environment=load_environment(job.scene.environment, job.path))
+    scene = scene_from_parts(triangles, normals, material_ids, materials,
+                             [*lights, *job.scene.lights], job.scene.background, camera,
+                             file=job.path, named_parts=named, tri_group=tri_group,
+                             groups=tuple(groups),
+                             environment=load_environment(job.scene.environment, job.path))
+    if job.scene.stars is not None:
+        scene.stars = star_field(job.scene.stars)
+    return scene
 
 
 def _gltf_parts(gl: gltf.GltfScene, group_of: Sequence[int],

@@ -84,6 +84,7 @@ from .description import (
     OutputSettings,
     RenderSettings,
     SceneSpec,
+    StarsSettings,
     ViewTransform,
     Worldline,
     frozen,
@@ -107,9 +108,9 @@ from .schema import (  # noqa: F401  (the limits are part of this module's API)
     MIN_BAND_STEP_NM,
     MIN_LINE_SIGMA_REL,
     ROTATION_TOL,
-    SENSOR_RANGE_NM,
     given,
 )
+from .stars import star_count
 from .view_transform import ocio_problem
 
 # ------------------------------------------------------------- cross-key errors
@@ -584,6 +585,12 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         if inc.scene.file is not None:
             raise sctx.error("include", f"{inc_path} names a scene.file; only the including "
                              "job may name a glTF file")
+        if inc.scene.stars is not None:
+            raise sctx.error("include", f"{inc_path} sets scene.stars; only the including "
+                             "job may set the sky's stars")
+        if inc.scene.environment is not None:
+            raise sctx.error("include", f"{inc_path} sets scene.environment; only the "
+                             "including job may set the sky's environment map")
         for m in inc.scene.materials:
             if m.name in origin:
                 raise sctx.error("include", f"material '{m.name}' of {inc_path} is already "
@@ -618,8 +625,17 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         objects=tuple(objects),
         lights=tuple(lights),
         includes=tuple(includes),
+        stars=_stars(s.stars),
         environment=_environment(s, sctx, job_dir),
     )
+
+
+def _stars(st: schema.Stars | None) -> StarsSettings | None:
+    """``scene.stars`` (every rule is the key's own, checked by the schema)."""
+    if st is None:
+        return None
+    return StarsSettings(catalog=st.catalog, magnitude_limit=float(st.magnitude_limit),
+                         brightness=float(st.brightness))
 
 
 def _environment(s: schema.Scene, ctx: _Ctx, job_dir: Path) -> EnvironmentSpec | None:
@@ -875,6 +891,10 @@ def job_summary(job: Job) -> str:
         f"scene       {s.file if s.file else 'no glTF file'}, {len(s.materials)} materials, "
         f"{len(s.objects)} objects, {len(s.lights)} lights, background {_fmt_vec(s.background)}"
     )
+    if s.stars is not None:
+        st = s.stars
+        lines.append(f"  stars     {star_count(st)} of the {st.catalog} catalogue to magnitude "
+                     f"{st.magnitude_limit:g}, brightness {st.brightness:g}")
     if s.environment is not None:
         e = s.environment
         lines.append(f"  environment {e.file}, strength {e.strength:g}, rotation_z "
