@@ -386,6 +386,22 @@ def test_digest_covers_the_map_content(tmp_path):
     assert len({a, b, c}) == 3
 
 
+def test_a_map_whose_tables_do_not_fit_is_refused(tmp_path, monkeypatch):
+    """The map's tables are checked against the memory limit when the scene is built
+    (here a limit of 1000 bytes: 32 texels need 4096)."""
+    from relray.core import resources
+    from relray.core.errors import UserError
+    from relray.core.scene import sky
+    write_map(tmp_path / "sky.exr", np.ones((4, 8, 3)))
+    spec = parse_job(base_job(scene={"environment": {"file": "sky.exr"}}, materials=[GREY],
+                              objects=[FAR_SPECK]), tmp_path / "job.toml").scene.environment
+    assert sky.load_environment(spec, tmp_path / "job.toml").pixels.shape == (4, 8, 3)
+    monkeypatch.setattr(sky.resources, "memory_limit",
+                        lambda: resources.MemoryLimit(1000, "the test"))
+    with pytest.raises(UserError, match="scene.environment.file.*8 x 4 environment map"):
+        sky.load_environment(spec, tmp_path / "job.toml")
+
+
 CLI_JOB = """
 [render]
 width = 8
