@@ -273,6 +273,24 @@ def test_uniform_map_equals_the_constant_sky_on_a_moving_body(tmp_path):
     assert abs(z.mean()) <= 5.0 / math.sqrt(z.size), z.mean()
 
 
+@pytest.mark.parametrize("mode", ["cie1931", "seed-gaussian", "rgb"])
+def test_uniform_map_seen_directly_is_the_background_of_its_colour(tmp_path, mode):
+    """An orange uniform map seen from a camera moving at β = 0.5 gives, pixel by pixel,
+    what the constant background of the same colour gives (the same seed: the same
+    rays and wavelengths), in each spectral mode: the map's texels are the RGB emitters
+    of physics.md (cie1931: k·s(λ)·D65_ext with the table's polished coefficients
+    against the background's own fit; seed-gaussian: the flat emitter of the mean;
+    rgb: the colour). Tolerance 2e-3 relative: the two fits' residuals, no noise."""
+    rgb = [0.9, 0.5, 0.2]
+    sections = {"render": {"width": 16, "height": 12, "spp": 4, "spectral": mode},
+                "camera": {"fov": 60.0}, "motion": {"beta": [0.3, 0.4, 0.0]},
+                "materials": [GREY], "objects": [FAR_SPECK]}
+    a = render(env_job(tmp_path, np.broadcast_to(rgb, (4, 8, 3)), **sections), tmp_path)
+    b = render(base_job(scene={"background": rgb}, **sections), tmp_path)
+    assert np.all(a.alpha == 0.0) and b.rgb.min() > 0.01
+    assert np.allclose(a.rgb, b.rgb, rtol=2e-3, atol=0.0), np.abs(a.rgb / b.rgb - 1).max()
+
+
 # ------------------------------------------------------------------------ the sampler
 
 
