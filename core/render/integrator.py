@@ -502,6 +502,14 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     table columns ``li``/``lf`` (:func:`column_split`); ``e_row``/``e_val`` cache per
     path the emission row that next-event estimation looked up last (``e_row`` = -1:
     none yet), so a path that keeps sampling the same light reads its spectrum once.
+
+    An environment map (``KernelScene.env_*``, :mod:`.environment`; ``env_on``) replaces
+    the constant sky: a miss looks it up by the ray's lab direction and lab lanes (a ray
+    that left a moving body was turned back into the lab there), MIS-weighted against
+    next-event estimation with its pdf at depth > 0 (bilinear where the weight is 1:
+    camera rays, after delta bounces); next-event estimation samples it as the light of
+    kind ``lights.ENV`` and evaluates its radiance per lane in the sampled direction (the
+    per-path ``e_row``/``e_val`` cache, for direction-independent spectra, is not used).
     """
     # the arrays as locals: reading them from the tuples inside the loop costs an
     # atomic reference-count increment and decrement per access (measured: ~40 % of the
