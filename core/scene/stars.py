@@ -154,9 +154,20 @@ def star_count(settings: StarsSettings) -> int:
 
 def star_field(settings: StarsSettings, catalogue: StarCatalogue | None = None) -> StarField:
     """The stars of ``settings``: those of ``catalogue`` (default: the one the settings
-    name) with magnitude ≤ ``magnitude_limit`` (at rest), brightest first, their flux
-    scaled by ``brightness`` (:func:`..physics.starlight.lab_solid_angle`)."""
-    cat = catalogue if catalogue is not None else CATALOGUES[settings.catalog]()
+    name, memoised per settings: an animation or the Blender viewport exports the same
+    sky again and again) with magnitude ≤ ``magnitude_limit`` (at rest), brightest first,
+    their flux scaled by ``brightness`` (:func:`..physics.starlight.lab_solid_angle`)."""
+    if catalogue is None:
+        return _catalogue_star_field(settings)
+    return _star_field(settings, catalogue)
+
+
+@functools.lru_cache(maxsize=4)
+def _catalogue_star_field(settings: StarsSettings) -> StarField:
+    return _star_field(settings, CATALOGUES[settings.catalog]())
+
+
+def _star_field(settings: StarsSettings, cat: StarCatalogue) -> StarField:
     keep = np.flatnonzero(cat.mag <= settings.magnitude_limit)
     keep = keep[np.argsort(cat.mag[keep], kind="stable")]
     temperature = starlight.temperature_from_bv(cat.bv[keep])
