@@ -722,8 +722,9 @@ def enabled_passes(view_layer) -> list[str]:
 
 
 def scene_hash(scene, mode: str) -> str:
-    """A content hash of an exported core Scene (geometry, materials, lights, sky, stars,
-    and the moving objects' groups: their velocities and pivots)."""
+    """A content hash of an exported core Scene (geometry, materials, lights, sky,
+    environment map, stars, and the moving objects' groups: their velocities and
+    pivots)."""
     h = hashlib.blake2b(digest_size=16)
     for a in (scene.triangles, scene.normals, scene.material_ids, scene.background,
               scene.tri_group):
@@ -732,6 +733,10 @@ def scene_hash(scene, mode: str) -> str:
     for group in scene.groups:
         for seg in group.segments:
             h.update(np.array([*seg.u, seg.t_ref, *seg.p_ref, seg.t_lo, seg.t_hi]).tobytes())
+    if scene.environment is not None:  # the world's Environment Texture
+        env = scene.environment
+        h.update(np.ascontiguousarray(env.pixels).tobytes())
+        h.update(np.array([env.strength, env.rotation_z]).tobytes())
     if scene.stars is not None:  # the world's stars (World › Stars)
         for a in (scene.stars.directions, scene.stars.temperature, scene.stars.omega):
             h.update(np.ascontiguousarray(a).tobytes())

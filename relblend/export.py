@@ -56,10 +56,13 @@ camera                   perspective: world matrix (scale removed), lens and sen
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -67,8 +70,9 @@ import numpy as np
 from ..core.errors import UserError
 from ..core.physics import spectrum
 from ..core.scene import job as core_job
-from ..core.scene.description import ObjectSpec, StarsSettings, frozen
+from ..core.scene.description import EnvironmentSpec, ObjectSpec, StarsSettings, frozen
 from ..core.scene.geometry import Scene, scene_from_parts
+from ..core.scene.sky import load_environment
 from ..core.scene.stars import star_field
 from ..core.scene.worldlines import rest_frame_offsets
 
@@ -488,6 +492,72 @@ def world_background(world, warnings: Warnings) -> np.ndarray:
     return np.maximum(color * r.value(node, "Strength", 1.0), 0.0)
 
 
+def world_environment(world, folder: Path | None, warnings: Warnings
+                      ) -> EnvironmentSpec | None:
+    """The world's Environment Texture (linked to its Background's Color, possibly
+    through a Mapping node that turns it about Z) as the job's ``scene.environment``,
+    or None. Packed or generated images are written into ``folder`` (a temporary one
+    when None). Blender's Mapping node turns the lookup vector by θ, which turns the
+    map by -θ: ``rotation_z = -θ`` (job-format.md, "Skies")."""
+    tree = node_tree(world) if world is not None else None
+    out = (tree.get_output_node("CYCLES") or tree.get_output_node("ALL")) if tree else None
+    bg = _linked_node(out.inputs["Surface"]) if out is not None else None
+    if bg is None or bg.type != "BACKGROUND":
+        return None
+    tex = _linked_node(bg.inputs["Color"])
+    if tex is None or tex.type != "TEX_ENVIRONMENT" or tex.image is None:
+        return None
+    if tex.projection != "EQUIRECTANGULAR":
+        warnings.add(f"world '{world.name}': the environment's {tex.projection.lower()} "
+                     "projection is not supported: rendered as equirectangular")
+    path = image_file(tex.image, folder)
+    if path is None:
+        warnings.add(f"world '{world.name}': the environment image '{tex.image.name}' has "
+                     "no file: the sky is black")
+        return None
+    rotation = 0.0
+    mapping = _linked_node(tex.inputs["Vector"])
+    if mapping is not None and mapping.type == "MAPPING":
+        rotation = -math.degrees(float(mapping.inputs["Rotation"].default_value[2])) \
+            if "Rotation" in mapping.inputs else 0.0
+    r = _Reader(f"world '{world.name}'", warnings)
+    return EnvironmentSpec(path, max(r.value(bg, "Strength", 1.0), 0.0), rotation)
+
+
+def world_environment_image(spec: EnvironmentSpec | None, world):
+    """:func:`core.scene.sky.load_environment` of the world's map; an unreadable image
+    stops the export with one line naming the world and the image."""
+    try:
+        return load_environment(spec, None)
+    except UserError as e:
+        raise ExportError(f"world '{world.name}': the environment image: {e.detail}") \
+            from None
+
+
+def unpack_folder() -> Path:
+    """This Blender session's folder for packed images (in the temporary folder)."""
+    path = Path(tempfile.gettempdir()) / f"relray-unpacked-{os.getpid()}"
+    path.mkdir(exist_ok=True)
+    return path
+
+
+def image_file(image, folder: Path | None) -> Path | None:
+    """A file holding ``image``: its own file on disk, or a packed image's bytes written
+    into ``folder``; None when it has none (a generated image, a missing file)."""
+    import bpy  # (the add-on's export runs inside Blender)
+
+    if image.packed_file is not None:
+        folder = unpack_folder() if folder is None else folder
+        suffix = Path(image.filepath).suffix or ".png"
+        path = folder / f"{bpy.path.clean_name(image.name)}{suffix}"
+        path.write_bytes(bytes(image.packed_file.data))
+        return path
+    if image.source == "FILE":
+        path = Path(bpy.path.abspath(image.filepath, library=image.library))
+        return path if path.is_file() else None
+    return None
+
+
 def world_stars(world) -> StarsSettings | None:
     """The world's stars (World › Stars) as the job's ``scene.stars``, or None."""
     s = getattr(world, "relray", None) if world is not None else None
@@ -589,6 +659,8 @@ class ExportedScene:
     rendered: set[str] = field(default_factory=set)
     #: the world's stars (World › Stars), None without
     stars: StarsSettings | None = None
+    #: the world's environment map (an Environment Texture on its Background), or None
+    environment: EnvironmentSpec | None = None
 
 
 @dataclass
@@ -706,6 +778,7 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
         cam_eval = cam.evaluated_get(depsgraph)
         camera = camera_settings(cam_eval, width, height, scene.render, warnings)
 
+    environment = world_environment(scene.world, None, warnings)
     b = _Builder(warnings)
     lights: list[core_job.LightSpec] = []
     cache: dict[tuple, tuple[MeshArrays, list]] = {}
@@ -769,8 +842,10 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
             np.concatenate(b.tris) if b.tris else empty,
             np.concatenate(b.normals) if b.normals else empty,
             np.concatenate(b.ids) if b.ids else np.zeros(0, np.int32),
-            b.materials, lights, world_background(scene.world, warnings), camera,
-            tri_group=tri_group, groups=groups)
+            b.materials, lights,
+            np.zeros(3) if environment else world_background(scene.world, warnings),
+            camera, tri_group=tri_group, groups=groups,
+            environment=world_environment_image(environment, scene.world))
     except UserError as e:
         raise ExportError(f"the scene has no geometry to render ({e.detail})") from None
     stars = world_stars(scene.world)
@@ -781,4 +856,4 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
     return ExportedScene(core_scene, camera, width, height, warnings, by_material, lights,
                          seconds=time.perf_counter() - t0, instances=count, moving=moving,
                          moving_instances=moving_instances, rendered=rendered,
-                         animated=dict(animated), stars=stars)
+                         animated=dict(animated), stars=stars, environment=environment)

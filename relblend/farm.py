@@ -55,6 +55,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import shutil
 import struct
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -190,7 +191,6 @@ def colour_management(scene, out: Path, warnings: list[str]) -> dict[str, Any]:
     (or "auto" with Auto Exposure) as ``output.exposure``. Gamma and curves are not
     carried (warned)."""
     import os
-    import shutil
 
     import bpy
 
@@ -509,6 +509,18 @@ def _safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "material"
 
 
+def farm_environment(env, out: Path) -> dict[str, Any]:
+    """The job's ``scene.environment``: the map copied into ``out``/textures (the farm
+    folder travels whole), its strength and rotation."""
+    folder = out / "textures"
+    folder.mkdir(exist_ok=True)
+    target = folder / _safe_name(Path(env.file).name)
+    if Path(env.file).resolve() != target.resolve():
+        shutil.copyfile(env.file, target)
+    return {"file": f"textures/{target.name}", "strength": float(env.strength),
+            "rotation_z": float(env.rotation_z)}
+
+
 def export_farm(context, directory: str | Path, frames: tuple[int, int] | None = None,
                 job_name: str = "job.toml") -> FarmExport:
     """Write scene.glb, meshes/*.ply and the job TOML into ``directory``."""
@@ -591,6 +603,8 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
         "motion": motion_doc,
         "scene": {"file": "scene.glb",
                   "background": [float(x) for x in exported.scene.background],
+                  **({"environment": farm_environment(exported.environment, out)}
+                     if exported.environment is not None else {}),
                   **({"stars": {"catalog": exported.stars.catalog,
                                 "magnitude_limit": exported.stars.magnitude_limit,
                                 "brightness": exported.stars.brightness}}
