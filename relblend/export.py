@@ -75,6 +75,7 @@ from ..core.scene.geometry import Scene, scene_from_parts
 from ..core.scene.sky import load_environment
 from ..core.scene.stars import star_field
 from ..core.scene.worldlines import rest_frame_offsets
+from . import sky_bake
 
 #: Object types that ``to_mesh`` turns into triangles.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
@@ -496,16 +497,25 @@ def world_environment(world, folder: Path | None, warnings: Warnings
                       ) -> EnvironmentSpec | None:
     """The world's Environment Texture (linked to its Background's Color, possibly
     through a Mapping node that turns it about Z) as the job's ``scene.environment``,
-    or None. Packed or generated images are written into ``folder`` (a temporary one
-    when None). Blender's Mapping node turns the lookup vector by θ, which turns the
-    map by -θ: ``rotation_z = -θ`` (job-format.md, "Skies")."""
+    or the bake of a procedural sky (:mod:`.sky_bake`), or None. A packed image is
+    written into ``folder`` (a temporary one when None). Blender's Mapping node turns
+    the lookup vector by θ, which turns the map by -θ: ``rotation_z = -θ``
+    (job-format.md, "Skies")."""
     tree = node_tree(world) if world is not None else None
     out = (tree.get_output_node("CYCLES") or tree.get_output_node("ALL")) if tree else None
     bg = _linked_node(out.inputs["Surface"]) if out is not None else None
     if bg is None or bg.type != "BACKGROUND":
         return None
     tex = _linked_node(bg.inputs["Color"])
-    if tex is None or tex.type != "TEX_ENVIRONMENT" or tex.image is None:
+    if tex is not None and tex.type != "TEX_ENVIRONMENT":  # a procedural sky: its bake
+        baked = sky_bake.baked_path(world)
+        if baked.is_file():
+            return EnvironmentSpec(baked, 1.0, 0.0)
+        warnings.add(f"world '{world.name}': its sky ('{tex.bl_idname}') is procedural and "
+                     "not baked: World › Sky › Bake Sky (the farm export bakes it); "
+                     "rendered with a constant colour")
+        return None
+    if tex is None or tex.image is None:
         return None
     if tex.projection != "EQUIRECTANGULAR":
         warnings.add(f"world '{world.name}': the environment's {tex.projection.lower()} "

@@ -65,7 +65,7 @@ from typing import Any
 
 import numpy as np
 
-from . import export, motion
+from . import export, motion, sky_bake
 
 GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
@@ -547,6 +547,8 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
         check_static_camera(samples)
         motion_doc = motion_table(cam.data.relray.mode, samples)
 
+    if sky_bake.is_procedural(scene.world):  # (an operator: it may render the bake)
+        sky_bake.bake(scene.world)
     glb = out / "scene.glb"
     with render_modifier_settings(scene):
         depsgraph = context.evaluated_depsgraph_get()

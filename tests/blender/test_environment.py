@@ -133,3 +133,43 @@ def test_environment_in_the_export_and_the_farm_job(engine, tmp_path):
     scene.world.node_tree.nodes["Environment Texture"].image.filepath = str(tmp_path / "gone.exr")
     ex = export.export_scene(bpy.context.evaluated_depsgraph_get())
     assert ex.environment is None and any("no file" in w for w in ex.warnings.messages)
+
+
+def test_a_procedural_sky_is_baked_and_rendered_as_cycles_shows_it(engine, tmp_path,
+                                                                     monkeypatch):
+    """A Sky Texture world: not baked, F12 warns and uses a colour; World › Sky › Bake
+    Sky renders it once (Cycles, equirectangular) and then relray shows what Cycles
+    shows: the same mean colour and the same brightening towards the horizon."""
+    if not rendering.engine_available("CYCLES"):
+        pytest.fail("Cycles is not available in this Blender")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    sky_bake = ext_module("relblend.sky_bake")
+    monkeypatch.setattr(sky_bake, "BAKE_SIZE", (512, 256))
+    path = tmp_path / "unused.exr"
+    marker_map(path)
+    scene = sky_scene(path)
+    scene.camera.rotation_euler = (math.radians(80.0), 0.0, 0.0)  # the horizon in view
+    world = scene.world
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    nodes.remove(nodes["Environment Texture"])
+    sky = nodes.new("ShaderNodeTexSky")
+    sky.sun_disc = False  # (a sub-texel disc: energy at one pixel, not a sky to compare)
+    links.new(sky.outputs["Color"], nodes["Background"].inputs["Color"])
+    nodes["Background"].inputs["Strength"].default_value = 0.3
+    export = ext_module("relblend.export")
+    ex = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    assert ex.environment is None and any("not baked" in w for w in ex.warnings.messages)
+    assert bpy.ops.relray.bake_sky() == {"FINISHED"}
+    baked = sky_bake.baked_path(world)
+    assert baked.is_file() and baked.parent == tmp_path / "cache" / "relray" / "sky"
+    ex = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    assert ex.environment.file == baked and ex.environment.strength == 1.0
+    rendering.set_output(scene, tmp_path, "cyc_", "OPEN_EXR")
+    ours = render_rgb(scene, "RELRAY", engine)
+    cycles = render_rgb(scene, "CYCLES", engine)
+    np.testing.assert_allclose(ours.mean((0, 1)), cycles.mean((0, 1)), rtol=0.05)
+    rows_ours = ours.mean(axis=(1, 2)).reshape(8, -1).mean(1)
+    rows_cycles = cycles.mean(axis=(1, 2)).reshape(8, -1).mean(1)
+    np.testing.assert_allclose(rows_ours, rows_cycles, rtol=0.08)
+    # (not a flat image: sky above, the darker ground below the horizon)
+    assert rows_cycles.max() > 2.0 * rows_cycles.min()
