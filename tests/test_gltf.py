@@ -632,3 +632,31 @@ def test_a_moving_gltf_node_renders_in_its_own_velocity_group(tmp_path: Path) ->
     np.testing.assert_allclose(scene.groups[0].segments[0].p_ref, [0.0, 5.0, 0.0])
     # node 1's triangle at world (x, -z, y) = (.., 5, ..) sits about its pivot
     np.testing.assert_allclose(scene.triangles[1][:, 1], 0.0, atol=1e-12)
+
+
+def _uv_quad(path: Path, uv: np.ndarray) -> Path:
+    b = GlbBuilder()
+    pos = b.add(QUAD_POS, g.FLOAT, g.VEC3)
+    tex = b.add(uv.astype(np.float32), g.FLOAT, g.VEC2)
+    idx = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
+                 meshes=[g.Mesh(primitives=[g.Primitive(
+                     attributes=g.Attributes(POSITION=pos, TEXCOORD_0=tex), indices=idx)])])
+    return b.finish(gl, path)
+
+
+def test_texcoord_0_is_read_with_v_flipped(tmp_path):
+    """glTF's UV origin is the image's top-left; relray's (Blender's) its bottom-left."""
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.5], [0.0, 0.25]])
+    s = gltf.load_gltf_scene(_uv_quad(tmp_path / "uv.glb", uv))
+    want = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)[QUAD_IDX.reshape(2, 3)]
+    np.testing.assert_allclose(s.uvs, want)
+    no_uv = gltf.load_gltf_scene(build_test_glb(tmp_path / "t.glb"))
+    assert no_uv.uvs.shape == (len(no_uv.triangles), 3, 2) and not no_uv.uvs.any()
+
+
+def test_nan_texcoord_is_a_user_error(tmp_path):
+    uv = np.array([[0.0, 0.0], [np.nan, 0.0], [1.0, 0.5], [0.0, 0.25]])
+    with pytest.raises(UserError, match="TEXCOORD_0 is not finite"):
+        gltf.load_gltf_scene(_uv_quad(tmp_path / "nan.glb", uv), key="scene.file",
+                             job_file=tmp_path / "job.toml")

@@ -17,6 +17,8 @@ mesh primitives (TRIANGLES, STRIP, FAN)    triangles, through the node hierarchy
                                            under a mirroring transform
 ``NORMAL``                                 shading normals (inverse-transpose transformed);
                                            face normals where a primitive has none
+``TEXCOORD_0``                             UVs, v -> 1 - v (Blender's bottom-left origin,
+                                           as Blender's importer); 0 where absent
 ``baseColorFactor`` (linear)               ``base_color`` (alpha ignored); default 1 1 1
 ``metallicFactor``, ``roughnessFactor``    ``metallic``, ``roughness``; default 1, 1
 ``emissiveFactor``                         ``emission``
@@ -130,6 +132,7 @@ class GltfScene(NamedTuple):
     camera: CameraSettings | None
     tri_motion: np.ndarray
     motions: list[NodeMotion]
+    uvs: np.ndarray | None = None  # float64 (T, 3, 2): TEXCOORD_0 with v -> 1 - v, else 0
 
 
 class _CorruptError(Exception):
@@ -440,8 +443,10 @@ def _triangulate(indices: np.ndarray, mode: int) -> np.ndarray | None:
 def _primitive_triangles(
     doc: dict[str, Any], buffers: list[bytes], prim: dict[str, Any], world: np.ndarray,
     where: str,
-) -> tuple[np.ndarray, np.ndarray | None] | None:
-    """World triangles (F, 3, 3) and normals (F, 3, 3) or None of one primitive."""
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None] | None:
+    """World triangles (F, 3, 3), normals (F, 3, 3) or None and UVs (F, 3, 2) or None
+    (TEXCOORD_0 with glTF's top-left origin turned into Blender's bottom-left one,
+    v -> 1 - v, as Blender's importer does) of one primitive."""
     for ext in prim.get("extensions", {}):
         if ext in _UNSUPPORTED_EXTENSIONS:
             raise _CorruptError(f"{where} uses {ext}, which relray cannot read")
@@ -478,7 +483,17 @@ def _primitive_triangles(
         length = np.linalg.norm(n, axis=1, keepdims=True)
         n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
         normals = n[faces]
-    return triangles, normals
+    uvs = None
+    if "TEXCOORD_0" in attributes:
+        uv = _read_accessor(doc, buffers, attributes["TEXCOORD_0"]).astype(np.float64)
+        if uv.ndim != 2 or uv.shape[1] < 2 or len(uv) != len(positions):
+            raise _CorruptError(f"{where}: TEXCOORD_0 must be 2-vectors, one per POSITION")
+        uv = uv[:, :2].copy()
+        if not np.all(np.isfinite(uv)):
+            raise _CorruptError(f"{where}: TEXCOORD_0 is not finite (NaN or inf)")
+        uv[:, 1] = 1.0 - uv[:, 1]
+        uvs = uv[faces]
+    return triangles, normals, uvs
 
 
 def _face_normals_repeated(triangles: np.ndarray) -> np.ndarray:
@@ -742,7 +757,7 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
     buffers = _load_buffers(doc, path.parent, glb_bin, key, job_file)
     materials = [_material(m, i) for i, m in enumerate(doc.get("materials", []))]
     default_id: int | None = None
-    tris, norms, mids, moving = [], [], [], []
+    tris, norms, mids, moving, uvs = [], [], [], [], []
     motions: list[NodeMotion] = []
     lights: list[LightSpec] = []
     light_defs = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
@@ -768,6 +783,7 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
                     mid = default_id
                 tris.append(got[0])
                 norms.append(got[1])
+                uvs.append(got[2] if got[2] is not None else np.zeros((len(got[0]), 3, 2)))
                 mids.append(np.full(len(got[0]), mid, dtype=np.int32))
                 moving.append(np.full(len(got[0]), motion_id, dtype=np.int32))
         light_ref = node.get("extensions", {}).get("KHR_lights_punctual")
@@ -784,4 +800,5 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
     material_ids = np.concatenate(mids) if mids else np.zeros(0, dtype=np.int32)
     tri_motion = np.concatenate(moving) if moving else np.zeros(0, dtype=np.int32)
     return GltfScene(triangles, normals, material_ids, materials, lights, _first_camera(doc),
-                     tri_motion, motions)
+                     tri_motion, motions,
+                     np.concatenate(uvs) if uvs else np.zeros((0, 3, 2)))
