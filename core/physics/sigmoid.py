@@ -29,12 +29,14 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import math
 import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from .. import user_cache_dir
 
@@ -63,7 +65,29 @@ def sigmoid_derivative(x: np.ndarray) -> np.ndarray:
     """ds/dx = ½ (1 + x²)^(-3/2); 0 at x = ±inf."""
     x = np.asarray(x, dtype=np.float64)
     with np.errstate(over="ignore"):
-        return 0.5 / (1.0 + x * x) ** 1.5
+        r = np.sqrt(1.0 + x * x)
+        return 0.5 / (r * r * r)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _sigmoid_pair(x, s, ds):
+    """s(x) (as :func:`sigmoid`) and ds/dx (as :func:`sigmoid_derivative`) in one pass."""
+    flat, fs, fds = x.ravel(), s.ravel(), ds.ravel()
+    for i in range(flat.shape[0]):
+        v = flat[i]
+        y = -abs(v)
+        r = math.sqrt(1.0 + y * y)
+        low = 0.5 / (r * (r - y))
+        fs[i] = low if v < 0.0 else 1.0 - low
+        fds[i] = 0.5 / (r * r * r)
+
+
+def sigmoid_and_derivative(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(s(x), ds/dx) for a float64 array, fused (the fit's inner loop)."""
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    s, ds = np.empty_like(x), np.empty_like(x)
+    _sigmoid_pair(x, s, ds)
+    return s, ds
 
 
 def grey_coefficients(g: np.ndarray) -> np.ndarray:
@@ -173,8 +197,7 @@ def fit_colours(target: np.ndarray, uv: np.ndarray, ir: np.ndarray, model: FitMo
 def _model(c, t, basis, B_band, b_uv, b_ir, uv, ir):
     """rgb(c) (k, 3) and its Jacobian (k, 3, 3) for the lumped node model (see fit())."""
     x = c @ basis.T  # (k, m): c0 t² + c1 t + c2 on the band nodes
-    s = sigmoid(x)
-    ds = sigmoid_derivative(x)
+    s, ds = sigmoid_and_derivative(x)
     rgb = s @ B_band.T
     J = np.einsum("km,cm,mj->kcj", ds, B_band, basis, optimize=True)
     # UV lump: nodes below the band carry s(t = 0) = s(c2) unless overridden.

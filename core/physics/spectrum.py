@@ -705,6 +705,12 @@ def _fit_model() -> _sig.FitModel:
     return _sig.FitModel.from_node_weights(B, _grid(), SIGMOID_BAND_NM, _FIT_VERSION)
 
 
+def reflectance_fit_model() -> _sig.FitModel:
+    """The forward model every reflectance fit uses (:func:`_fit_model`; also the
+    texture table's, :mod:`.rgb_table`)."""
+    return _fit_model()
+
+
 #: Fitted coefficients, in memory and in $XDG_CACHE_HOME/relray (see sigmoid_coefficients).
 _CACHE = _sig.CoefficientCache(_FIT_VERSION)
 

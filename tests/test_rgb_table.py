@@ -1,0 +1,130 @@
+"""core.physics.rgb_table: the Jakob–Hanika coefficient table for texels."""
+
+from __future__ import annotations
+
+import colour
+import numpy as np
+import pytest
+from numba import njit
+
+from relray.core.physics import rgb_table as rt
+from relray.core.physics import sigmoid as sg
+from relray.core.physics import spectrum as sp
+
+WP_D65 = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+#: the issue's bound on the round trip RGB -> table spectrum -> RGB under D65
+MAX_DELTA_E00 = 0.5
+
+
+@pytest.fixture(scope="module")
+def table():
+    return rt.coefficient_table()
+
+
+def film_rgb(coeffs: np.ndarray) -> np.ndarray:
+    """Linear Rec.709 the film sees of the reflectances ``coeffs`` under D65_ext."""
+    refl = sg.evaluate(coeffs, sp.grid_nm(), sp.SIGMOID_BAND_NM)
+    return sp.rgb_of(refl * sp.d65_ext()[None, :].astype(np.float64))
+
+
+def lab(rgb: np.ndarray) -> np.ndarray:
+    xyz = np.asarray(rgb) @ np.linalg.inv(sp.sensor_to_rgb("cie1931")).T
+    return colour.XYZ_to_Lab(xyz, WP_D65)
+
+
+def test_z_nodes_are_a_double_smoothstep():
+    z = rt.z_nodes(5)
+    s = lambda t: t * t * (3 - 2 * t)  # noqa: E731
+    assert np.allclose(z, s(s(np.linspace(0, 1, 5)))) and z[0] == 0 and z[-1] == 1
+
+
+def test_table_is_finite_cached_and_shaped(table):
+    assert table.data.shape == (3, rt.RES, rt.RES, rt.RES, 3) and table.data.dtype == np.float32
+    assert np.all(np.isfinite(table.data)) and np.abs(table.data[:, 1:]).max() <= rt.C_MAX
+    assert rt.coefficient_table() is table
+
+
+@njit
+def _blend(scale, data, rgb, lams, out):
+    for i in range(rgb.shape[0]):
+        cell = rt.table_cell(scale, data, rgb[i, 0], rgb[i, 1], rgb[i, 2])
+        for k in range(lams.shape[0]):
+            out[i, k] = rt.cell_reflectance(data, cell, lams[k])
+
+
+def colours() -> np.ndarray:
+    """Random in-gamut colours, dark ones, the cube's edges and corners, near black/white."""
+    rng = np.random.default_rng(7)
+    edges = np.array([[a, b, c] for a in (0, 0.5, 1) for b in (0, 0.5, 1) for c in (0, 1)])
+    near = np.concatenate([rng.uniform(0.0, 0.02, (200, 3)), rng.uniform(0.97, 1.0, (600, 3))])
+    return np.concatenate([rng.uniform(0.0, 1.0, (3000, 3)), rng.uniform(0, 1, (500, 3)) ** 4,
+                           edges, near])
+
+
+def test_kernel_blend_round_trip_delta_e_below_half(table):
+    """What the kernels use (:func:`table_reflectance`: the nodes' spectra blended): the
+    colour under D65 is the target's within ΔE00 < 0.5 over the whole cube."""
+    rgb = colours()
+    grid = sp.grid_nm()
+    lo, hi = np.searchsorted(grid, [300.0, 900.0])
+    refl = np.zeros((len(rgb), sp.GRID_N))
+    part = np.empty((len(rgb), hi - lo))
+    _blend(table.scale, table.data, rgb, grid[lo:hi], part)
+    refl[:, lo:hi] = part
+    refl[:, :lo], refl[:, hi:] = part[:, :1], part[:, -1:]   # constant outside the band
+    got = sp.rgb_of(refl * sp.d65_ext()[None, :].astype(np.float64))
+    de = colour.delta_E(lab(rgb), lab(got), method="CIE 2000")
+    assert np.max(de) < MAX_DELTA_E00, (np.max(de), rgb[np.argmax(de)])
+
+
+def test_coefficients_round_trip_delta_e_below_half(table):
+    """Per-texel coefficients (:func:`coefficients`): ΔE00 < 0.5 over the whole cube."""
+    rgb = colours()
+    got = film_rgb(rt.coefficients(rgb, table))
+    de = colour.delta_E(lab(rgb), lab(got), method="CIE 2000")
+    assert np.max(de) < MAX_DELTA_E00, (np.max(de), rgb[np.argmax(de)])
+
+
+def test_nodes_agree_with_the_per_colour_fit(table):
+    """At a table node the coefficients are the fit's (the interpolation weights are 1)."""
+    k = 40
+    rgb = rt.node_colours(1, float(table.scale[k]))[[65, 1000, 3000]]
+    got = rt.coefficients(rgb, table)
+    want = sp.sigmoid_coefficients(rgb)
+    assert np.allclose(film_rgb(got), film_rgb(want), atol=2e-6)
+
+
+def test_greys_are_exact_and_black_and_white_finite(table):
+    g = np.array([[0.0] * 3, [0.18] * 3, [0.5] * 3, [1.0] * 3])
+    c = rt.coefficients(g, table)
+    assert np.all(np.isfinite(c)) and np.all(c[:, :2] == 0)
+    s = sg.sigmoid(c[:, 2].astype(np.float64))
+    assert np.allclose(s, [rt.GREY_EPS, 0.18, 0.5, 1 - rt.GREY_EPS], rtol=1e-5)
+
+
+@njit
+def _device(c, lam):
+    return rt.sigmoid_reflectance(c[0], c[1], c[2], lam)
+
+
+@njit
+def _node(scale, data, rgb):
+    return rt.table_coefficients(scale, data, rgb[0], rgb[1], rgb[2])
+
+
+def test_device_functions_match_numpy(table):
+    c = rt.coefficients(np.array([0.8, 0.3, 0.1]), table).astype(np.float64)
+    for lam in (300.0, 380.0, 455.5, 600.0, 720.0, 900.0):
+        want = sg.evaluate(c[None], np.array([lam]), sp.SIGMOID_BAND_NM)[0, 0]
+        assert _device(c, lam) == pytest.approx(want, rel=1e-12)
+    k, y, x = 30, 20, 50  # a node of the green table: its own coefficients
+    rgb = rt.node_colours(1, float(table.scale[k])).reshape(rt.RES, rt.RES, 3)[y, x]
+    assert np.allclose(_node(table.scale, table.data, rgb), table.data[1, k, y, x], rtol=1e-5)
+
+
+def test_lambda_of_column_inverts_the_grid():
+    grid = sp.grid_nm()
+    for u in (0, 1234, 9000, sp.GRID_N - 1):
+        assert rt.lambda_of_column(float(u)) == pytest.approx(grid[u], rel=1e-9)
+    u = (np.log(550.0) - sp.LOG_GRID_MIN) * sp.INV_DLOG
+    assert rt.lambda_of_column(u) == pytest.approx(550.0, rel=1e-12)
