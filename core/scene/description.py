@@ -241,6 +241,10 @@ class MaterialSpec:
 
 #: A material's texture slots, in the order of the kernel's per-material table.
 TEXTURE_SLOTS = ("base_color", "roughness", "metallic", "emission", "normal")
+#: How each slot's image is decoded (scene.images): colour is sRGB in 8/16-bit files
+#: (linear in EXR/HDR), the maps are linear data.
+TEXTURE_ENCODING = {"base_color": "auto", "roughness": "linear", "metallic": "linear",
+                    "emission": "auto", "normal": "linear"}
 
 
 @dataclass(frozen=True, eq=False)

@@ -75,8 +75,16 @@ import numpy as np
 from numba import njit
 
 from ..errors import UserError
-from . import gltf, shapes, worldlines
-from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
+from . import gltf, images, shapes, worldlines
+from .description import (
+    TEXTURE_ENCODING,
+    TEXTURE_SLOTS,
+    CameraSettings,
+    Job,
+    LightSpec,
+    MaterialSpec,
+    ObjectSpec,
+)
 from .footprint import check_memory
 from .worldlines import VelocityGroup
 
@@ -250,6 +258,17 @@ def tessellate(obj: ObjectSpec, key: str, job_file: Path) -> Mesh:
     raise ValueError(f"unknown shape {obj.shape!r}")  # job.py has validated the shape
 
 
+def check_textures(materials: Sequence[MaterialSpec]) -> None:
+    """Read every texture image of ``materials`` now (a missing, unreadable, empty, too
+    large or non-finite image is a UserError naming its key and file before anything is
+    rendered or written); :func:`.images.read_image` memoises them for the renderer."""
+    for m in materials:
+        for slot, tex in zip(TEXTURE_SLOTS, m.textures(), strict=True):
+            if tex is not None:
+                images.read_image(tex.file, key=tex.key or "scene.file", file=tex.job_file,
+                                  encoding=TEXTURE_ENCODING[slot])
+
+
 def area_light_material(light: LightSpec, index: int) -> MaterialSpec:
     """The emissive material of an area light: L = P / (π A), one-sided, black."""
     area = light.size[0] * light.size[1]
@@ -320,6 +339,7 @@ def build_scene(job: Job) -> Scene:
     camera = None
     named: list[tuple[str, int]] = []
     lighten: dict[str, str] = {}
+    warned_uv = False
     gl = None
     if job.scene.file is not None:
         gl = gltf.load_gltf_scene(job.scene.file, key="scene.file", job_file=job.path)
@@ -343,9 +363,14 @@ def build_scene(job: Job) -> Scene:
         if g:
             tris = tris + offsets[len(node_specs) + i]
         parts.append(_Part(tris, norms, ids[obj.material], g, uvs))
+        if uvs is None and materials[ids[obj.material]].textured() and not warned_uv:
+            warned_uv = True
+            log.warning("objects[%d]: the mesh file has no texture coordinates (UVs): its "
+                        "textured material shows the texel at (0, 0) everywhere", i)
         named.append((f"objects[{i}]", len(tris)))
         if obj.shape == "mesh":
             lighten[f"objects[{i}]"] = f"objects[{i}].file"
+    check_textures(materials)
     # before the accelerator: names what to lighten (a mesh's file, else the object)
     check_memory(job.render, job.output, [(lighten.get(key, key), n) for key, n in named],
                  job.path)

@@ -768,12 +768,14 @@ def _guarded(path: Path, key: str, job_file: str | Path | None, func: Any) -> An
 
 
 def external_files(path: str | Path) -> list[Path]:
-    """The files a glTF document reads besides itself (its buffers' file URIs), for the
-    resume digest; [] when the document cannot be read (loading it will say why)."""
+    """The files a glTF document reads besides itself (its buffers' and images' file
+    URIs), for the resume digest; [] when the document cannot be read (loading it will
+    say why)."""
     path = Path(path)
     try:
         doc, _ = _read_document(path, "scene.file", path)
         uris = [b.get("uri") for b in _array(doc, "buffers")]
+        uris += [i.get("uri") for i in _array(doc, "images") if isinstance(i, dict)]
     except (UserError, _CorruptError, KeyError, TypeError, ValueError, RecursionError):
         return []
     return [path.parent / unquote(u) for u in uris
@@ -882,6 +884,7 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
     materials = [_material(m, i, reader) for i, m in enumerate(doc.get("materials", []))]
     default_id: int | None = None
     tris, norms, mids, moving, uvs = [], [], [], [], []
+    warned_uv = False
     motions: list[NodeMotion] = []
     lights: list[LightSpec] = []
     light_defs = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
@@ -908,6 +911,10 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
                 tris.append(got[0])
                 norms.append(got[1])
                 uvs.append(got[2] if got[2] is not None else np.zeros((len(got[0]), 3, 2)))
+                if got[2] is None and materials[mid].textured() and not warned_uv:
+                    warned_uv = True
+                    log.warning("glTF %s: no TEXCOORD_0 (UVs): its textured material shows "
+                                "the texel at (0, 0) everywhere", where)
                 mids.append(np.full(len(got[0]), mid, dtype=np.int32))
                 moving.append(np.full(len(got[0]), motion_id, dtype=np.int32))
         light_ref = node.get("extensions", {}).get("KHR_lights_punctual")
