@@ -31,12 +31,13 @@ from relray.bench import (
     first_render,
     report,
     skips,
+    textures,
     throughput,
     velocity_groups,
 )
 
-SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "first",
-            "convergence")
+SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "textures",
+            "first", "convergence")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -65,6 +66,9 @@ class Plan:
     moving_size: int = 128
     moving_spp: int = 16
     moving_repeat: int = 5
+    tex_size: int = 128
+    tex_spp: int = 16
+    tex_rounds: int = 3
     first_render: bool = True  # three Blender sessions, two of them compiling kernels
     anim_frames: int = 24
     anim_separate: int = 24
@@ -79,8 +83,9 @@ FULL = Plan("full")
 QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_repeat=1,
              heavy_size=128, heavy_spp=8, heavy_repeat=1, beta_size=48, beta_spp=8,
              beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
-             moving_size=64, moving_spp=8, moving_repeat=2, first_render=False,
-             anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
+             moving_size=64, moving_spp=8, moving_repeat=2, tex_size=64, tex_spp=8,
+             tex_rounds=2, first_render=False, anim_frames=8, anim_spp=2, anim_separate=1,
+             wait_idle_s=0.0,
              conv=convergence.ConvergenceConfig(width=64, height=64,
                                                 spp=[4, 8, 16, 32, 64, 128],
                                                 thresholds=[0.1, 0.05], repeats=2,
@@ -89,7 +94,8 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
              skip_spp=2, skip_ref_spp=4, skip_repeat=1, moving_size=8, moving_spp=2,
-             moving_repeat=1, first_render=False, anim_frames=0, anim_separate=0,
+             moving_repeat=1, tex_size=8, tex_spp=1, tex_rounds=1, first_render=False,
+             anim_frames=0, anim_separate=0,
              anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
              conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
                                                 thresholds=[0.5], repeats=1, ref_factor=2))
@@ -192,6 +198,11 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
                      velocity_groups.noise_rows(plan.moving_spp, plan.moving_size,
                                                 plan.moving_size, threads))
         done("moving")
+    if "textures" in sections:
+        section("textures")
+        cm.write_csv(out / "textures.csv", textures.rows(plan.tex_spp, plan.tex_size,
+                                                         threads, plan.tex_rounds))
+        done("textures")
     if "first" in sections and plan.first_render:
         section("first")
         cm.write_csv(out / "first_render.csv", first_render.rows())

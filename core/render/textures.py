@@ -329,16 +329,19 @@ def bounce_spread(spread, alpha, delta):
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def wrap_index(i, n, mode):
-    """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2)."""
-    if mode == 0:
-        return i % n
-    if mode == 1:
-        return min(max(i, 0), n - 1)
-    k = i % (2 * n)
-    return k if k < n else 2 * n - 1 - k
+    """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2). Selects, no
+    branches (the lookups that inline it read arrays: module note below)."""
+    r = i - n * math.floor(i / n)
+    k = i - 2 * n * math.floor(i / (2 * n))
+    m = min(k, 2 * n - 1 - k)
+    c = min(max(i, 0), n - 1)
+    return r if mode == 0 else (c if mode == 1 else m)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+# The lookups read arrays, so they are inlined and straight-line (selects, no branch or
+# loop), as integrator.py's device functions: numba then keeps no reference counts on the
+# arrays in the kernel's loop (a call, or a branch, costs atomic increments per lookup).
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
     nearest texel centres (module docstring)."""
@@ -365,25 +368,23 @@ def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     return c0, c1, c2, c3
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
     """RGBA of texture ``tex`` at (u, v) and the fractional level of detail ``lod``
     (clamped to [0, levels - 1]): linear between the bilinear lookups of the two levels
-    around it."""
+    around it (at the last level both are that level)."""
     top = desc[tex, 2] - 1
     lam = min(max(lod, 0.0), np.float64(top))
-    l0 = min(int(lam), top)
+    l0 = int(lam)
     f = lam - l0
     a = texture_bilinear(atlas, desc, level_rows, tex, l0, u, v)
-    if f <= 0.0 or l0 >= top:
-        return a
-    b = texture_bilinear(atlas, desc, level_rows, tex, l0 + 1, u, v)
+    b = texture_bilinear(atlas, desc, level_rows, tex, min(l0 + 1, top), u, v)
     g = 1.0 - f
     return (g * a[0] + f * b[0], g * a[1] + f * b[1], g * a[2] + f * b[2],
             g * a[3] + f * b[3])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def slot_texel(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
                u, v, lod_geo):
     """The factor-weighted RGBA texel of material m's ``slot`` at the triangle's (u, v)
@@ -435,7 +436,7 @@ def hit_lod(duv1, duv2, area, width, cos_g):
         max(width, 1e-30) / max(abs(cos_g), MIN_COS))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     """The normal of a tangent-space normal map's texel (r, g, b) ∈ [0, 1]³ at a hit
     whose interpolated (or geometric) normal is ``n0`` (on the triangle's front side):
@@ -455,9 +456,7 @@ def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     du1, dv1 = a[0] * duv1[0] + a[1] * duv1[1], a[3] * duv1[0] + a[4] * duv1[1]
     du2, dv2 = a[0] * duv2[0] + a[1] * duv2[1], a[3] * duv2[0] + a[4] * duv2[1]
     det = du1 * dv2 - du2 * dv1
-    if det == 0.0:
-        return nx, ny, nz
-    r = 1.0 / det
+    r = 1.0 / det if det != 0.0 else 0.0  # degenerate UVs: T = B = 0, n = s_z N
     tx_ = (e1[tri, 0] * dv2 - e2[tri, 0] * dv1) * r
     ty_ = (e1[tri, 1] * dv2 - e2[tri, 1] * dv1) * r
     tz_ = (e1[tri, 2] * dv2 - e2[tri, 2] * dv1) * r
@@ -468,9 +467,10 @@ def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     tx_, ty_, tz_ = tx_ - k * nx, ty_ - k * ny, tz_ - k * nz
     inv_t = 1.0 / math.sqrt(tx_ * tx_ + ty_ * ty_ + tz_ * tz_ + 1e-30)
     tx_, ty_, tz_ = tx_ * inv_t, ty_ * inv_t, tz_ * inv_t
-    cx, cy, cz = ny * tz_ - nz * ty_, nz * tx_ - nx * tz_, nx * ty_ - ny * tx_
-    if cx * bx + cy * by + cz * bz < 0.0:
-        cx, cy, cz = -cx, -cy, -cz
+    sgn = 1.0 if (ny * tz_ - nz * ty_) * bx + (nz * tx_ - nx * tz_) * by + (
+        nx * ty_ - ny * tx_) * bz >= 0.0 else -1.0
+    cx, cy, cz = (sgn * (ny * tz_ - nz * ty_), sgn * (nz * tx_ - nx * tz_),
+                  sgn * (nx * ty_ - ny * tx_))
     sx = (2.0 * texel[0] - 1.0) * scale
     sy = (2.0 * texel[1] - 1.0) * scale
     sz = 2.0 * texel[2] - 1.0
