@@ -357,8 +357,8 @@ def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
     _section_adaptive(add, d, plots, md)
     _section_skips(add, d)
     _section_moving(add, d)
-    _section_textures(add, d)
     _section_first(add, d)
+    _section_textures(add, d)
     _section_profile(add, d, plots, md, meta)
     _section_recommendations(add, d)
     _section_missing(add, d, meta)
@@ -773,7 +773,7 @@ def _section_textures(add, d) -> None:
         return
     r0 = rows[0]
     add(f"Cornell box {r0['size']:.0f}², {r0['spp']:.0f} spp, {r0['threads']:.0f} "
-        f"threads, paths per CPU-second, median of {r0['rounds']:.0f} alternated renders "
+        f"thread(s), paths per CPU-second, median of {r0['rounds']:.0f} alternated renders "
         "(`bench/textures.py`). *Textured*: the white surfaces with a 512² sRGB checker "
         "(repeated 4×), a 256² roughness map and a 256² flat normal map, the red and green "
         "walls with a 256² colour noise: every hit but the light's reads 1 to 3 textures "
