@@ -79,6 +79,7 @@ stress: $(STAMP)
 ## make gallery: the seed report's figures and the moving objects (presets/moving), rendered into docs/gallery
 gallery: $(STAMP)
 	$(BIN)/python docs/gallery.py
+	$(BIN)/python docs/starbow.py
 
 ## make bench: the benchmark suite (10 min idle, up to an hour busy): bench/results/*.csv,
 ## plots, bench/RESULTS.md; installs bpy 5.0.1 (Cycles, the anchor) if it is missing

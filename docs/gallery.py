@@ -9,7 +9,8 @@ figures 2-3 ... 2-18 again with relray's physics (CIE 1931 sensor, Jakob-Hanika 
 Doppler and the D^5 searchlight) into docs/gallery/seed_figures_physical.png, and writes
 docs/gallery/flyby.png from out/flyby/ when `make demo` has rendered it. The moving
 objects' presets (presets/moving/) give one chosen frame each to
-docs/gallery/moving.png.
+docs/gallery/moving.png. The starfield presets (presets/stars/: ahead, sideways and back,
+β = 0 ... 0.999 as frames 1-5) go to docs/gallery/stars.png, one row per view.
 """
 
 from __future__ import annotations
@@ -86,10 +87,28 @@ def moving_sheet(spp: int | None) -> None:
                               captions=captions))
 
 
+STAR_VIEWS = (("ahead", "ahead"), ("side", "sideways"), ("back", "back"))
+STAR_BETAS = ("0", "0.5", "0.9", "0.99", "0.999")
+
+
+def stars_sheet() -> None:
+    """presets/stars/*.toml (5 frames each) tiled into docs/gallery/stars.png."""
+    pngs, captions = [], []
+    for name, text in STAR_VIEWS:
+        job = jobmod.load_job(ROOT / "presets" / "stars" / f"{name}.toml")
+        render_job(job, overwrite=True, show_progress=False)
+        for frame, beta in enumerate(STAR_BETAS, start=1):
+            pngs.append(job.output.dir / f"{job.output.name.format(frame=frame)}.png")
+            captions.append(f"{text}, b = {beta}")
+    print(write_contact_sheet(pngs, ROOT / "docs" / "gallery" / "stars.png",
+                              columns=len(STAR_BETAS), captions=captions))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=None)
-    ap.add_argument("--only", default="seed,moving", help="seed, moving or both")
+    ap.add_argument("--only", default="seed,moving,stars",
+                    help="a comma-separated choice of seed, moving, stars")
     args = ap.parse_args()
     parts = set(args.only.split(","))
     if "seed" in parts:
@@ -99,6 +118,8 @@ def main() -> None:
         sheet(doppler, args.spp, "seed_figures_physical", physical=True)
     if "moving" in parts:
         moving_sheet(args.spp)
+    if "stars" in parts:
+        stars_sheet()
     flyby = sorted((ROOT / "out" / "flyby").glob("frame_*.png"))
     if flyby:
         print(write_contact_sheet(flyby[::3], ROOT / "docs" / "gallery" / "flyby.png",

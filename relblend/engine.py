@@ -722,8 +722,8 @@ def enabled_passes(view_layer) -> list[str]:
 
 
 def scene_hash(scene, mode: str) -> str:
-    """A content hash of an exported core Scene (geometry, materials, lights, sky, and
-    the moving objects' groups: their velocities and pivots)."""
+    """A content hash of an exported core Scene (geometry, materials, lights, sky, stars,
+    and the moving objects' groups: their velocities and pivots)."""
     h = hashlib.blake2b(digest_size=16)
     for a in (scene.triangles, scene.normals, scene.material_ids, scene.background,
               scene.tri_group):
@@ -732,6 +732,9 @@ def scene_hash(scene, mode: str) -> str:
     for group in scene.groups:
         for seg in group.segments:
             h.update(np.array([*seg.u, seg.t_ref, *seg.p_ref, seg.t_lo, seg.t_hi]).tobytes())
+    if scene.stars is not None:  # the world's stars (World › Stars)
+        for a in (scene.stars.directions, scene.stars.temperature, scene.stars.omega):
+            h.update(np.ascontiguousarray(a).tobytes())
     h.update(repr(scene.materials).encode())
     h.update(str(scene.light_triangles).encode())  # which triangles are area lights
     for light in scene.lights:

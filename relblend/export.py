@@ -67,8 +67,9 @@ import numpy as np
 from ..core.errors import UserError
 from ..core.physics import spectrum
 from ..core.scene import job as core_job
-from ..core.scene.description import ObjectSpec, frozen
+from ..core.scene.description import ObjectSpec, StarsSettings, frozen
 from ..core.scene.geometry import Scene, scene_from_parts
+from ..core.scene.stars import star_field
 from ..core.scene.worldlines import rest_frame_offsets
 
 #: Object types that ``to_mesh`` turns into triangles.
@@ -487,6 +488,14 @@ def world_background(world, warnings: Warnings) -> np.ndarray:
     return np.maximum(color * r.value(node, "Strength", 1.0), 0.0)
 
 
+def world_stars(world) -> StarsSettings | None:
+    """The world's stars (World › Stars) as the job's ``scene.stars``, or None."""
+    s = getattr(world, "relray", None) if world is not None else None
+    if s is None or not s.use_stars:
+        return None
+    return StarsSettings("hipparcos", float(s.star_magnitude_limit), float(s.star_brightness))
+
+
 def render_size(render) -> tuple[int, int]:
     """The render size in pixels, resolution percentage applied (as Blender does)."""
     pct = render.resolution_percentage
@@ -578,6 +587,8 @@ class ExportedScene:
     #: the names of the objects the view layer evaluates (themselves, instancers or
     #: instances: F12 renders no other object; the farm export leaves the rest out)
     rendered: set[str] = field(default_factory=set)
+    #: the world's stars (World › Stars), None without
+    stars: StarsSettings | None = None
 
 
 @dataclass
@@ -762,9 +773,12 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
             tri_group=tri_group, groups=groups)
     except UserError as e:
         raise ExportError(f"the scene has no geometry to render ({e.detail})") from None
+    stars = world_stars(scene.world)
+    if stars is not None:
+        core_scene.stars = star_field(stars)
     by_material = {m.name: core_scene.triangles[core_scene.material_ids == i]
                    for i, m in enumerate(core_scene.materials)}
     return ExportedScene(core_scene, camera, width, height, warnings, by_material, lights,
                          seconds=time.perf_counter() - t0, instances=count, moving=moving,
                          moving_instances=moving_instances, rendered=rendered,
-                         animated=dict(animated))
+                         animated=dict(animated), stars=stars)

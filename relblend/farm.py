@@ -31,7 +31,7 @@ moving objects      an object F12 moves (``object.relray.velocity`` ≠ 0): its 
 [[lights]]          point, spot, sun and area lights (the glTF light units would round-trip
                     through photometric conversions; an area light's ``up`` keeps its
                     rotation about its axis)
-[scene]             ``file = "scene.glb"``, the world's constant background
+[scene]             ``file = "scene.glb"``, the world's constant background and its stars
 [camera]            position, rotation (3×3 rows), vertical fov, shift
 [motion]            mode; ct', ct' per frame; one keyframe per frame (β in world axes,
                     evaluated with every F-curve, driver, parent and constraint)
@@ -590,7 +590,11 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
                    "fov": cam_settings.fov, "shift": list(cam_settings.shift)},
         "motion": motion_doc,
         "scene": {"file": "scene.glb",
-                  "background": [float(x) for x in exported.scene.background]},
+                  "background": [float(x) for x in exported.scene.background],
+                  **({"stars": {"catalog": exported.stars.catalog,
+                                "magnitude_limit": exported.stars.magnitude_limit,
+                                "brightness": exported.stars.brightness}}
+                     if exported.stars is not None else {})},
     }
     if materials:
         job["materials"] = materials

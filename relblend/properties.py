@@ -245,6 +245,21 @@ class RelrayObjectSettings(bpy.types.PropertyGroup):
                          get=_object_gamma_get, precision=6)
 
 
+class RelrayWorldSettings(bpy.types.PropertyGroup):
+    """The world's stars: the job's ``scene.stars`` (job-format.md, "Skies")."""
+
+    use_stars: BoolProperty(
+        name="Stars", default=False,
+        description="A real star sky (the ESA Hipparcos-2 catalogue) at infinity, each star "
+                    "a blackbody point source, aberrated and Doppler-shifted for the camera")
+    star_magnitude_limit: FloatProperty(
+        name="Magnitude Limit", default=8.0, min=-2.0, max=14.0, soft_max=10.0,
+        description="Leave out the stars fainter than this magnitude (as seen at rest)")
+    star_brightness: FloatProperty(
+        name="Brightness", default=1.0, min=0.0, soft_max=10.0,
+        description="Scales every star's flux (1: the photometric zero point of the core)")
+
+
 class RelrayViewLayerSettings(bpy.types.PropertyGroup):
     """Extra passes of the Relativistic engine."""
 
@@ -309,7 +324,7 @@ def addon_preferences(context):
 
 
 classes = (RelrayCameraSettings, RelraySceneSettings, RelrayObjectSettings,
-           RelrayViewLayerSettings, RelrayPreferences)
+           RelrayWorldSettings, RelrayViewLayerSettings, RelrayPreferences)
 
 
 def register() -> None:
@@ -319,9 +334,11 @@ def register() -> None:
     bpy.types.Scene.relray = PointerProperty(type=RelraySceneSettings)
     bpy.types.Object.relray = PointerProperty(type=RelrayObjectSettings)
     bpy.types.ViewLayer.relray = PointerProperty(type=RelrayViewLayerSettings)
+    bpy.types.World.relray = PointerProperty(type=RelrayWorldSettings)
 
 
 def unregister() -> None:
+    del bpy.types.World.relray
     del bpy.types.ViewLayer.relray
     del bpy.types.Object.relray
     del bpy.types.Scene.relray

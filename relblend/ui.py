@@ -212,6 +212,30 @@ class RELRAY_PT_object_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 -
             layout.label(text="Its location is where it is at lab time 0", icon="INFO")
 
 
+class RELRAY_PT_world_stars(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    """World › Stars: the real star sky (``scene.stars`` of the job)."""
+
+    bl_label = "Stars"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return context.world is not None and super().poll(context)
+
+    def draw_header(self, context):
+        self.layout.prop(context.world.relray, "use_stars", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.world.relray
+        layout.use_property_split = True
+        layout.active = s.use_stars
+        layout.prop(s, "star_magnitude_limit")
+        layout.prop(s, "star_brightness")
+        layout.label(text="Hipparcos-2: blackbody stars at infinity, aberrated and "
+                          "Doppler-shifted", icon="INFO")
+
+
 class RELRAY_PT_sampling(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     bl_label = "Sampling"
     bl_context = "render"
@@ -338,6 +362,7 @@ classes = (
     RELRAY_PT_scene_relativity,
     RELRAY_PT_camera_relativity,
     RELRAY_PT_object_relativity,
+    RELRAY_PT_world_stars,
     RELRAY_PT_relativity_summary,
     RELRAY_PT_sampling,
     RELRAY_PT_film,

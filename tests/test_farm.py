@@ -516,6 +516,29 @@ def test_still_in_sample_batches_is_the_same_for_any_number_of_workers(tmp_path,
     assert_same_frames(local.output.dir, job.output.dir, [1])
 
 
+def test_stars_are_in_farm_frames_and_sample_batches(tmp_path, client):
+    """The star layer (core/render/starfield.py) reaches the frames the workers render,
+    whole or in sample batches, exactly as in a one-process render."""
+    text = TINY.replace("[scene]\n", "[scene]\nstars = { magnitude_limit = 4.5, "
+                                      "brightness = 100.0 }\n").replace("spp = 2", "spp = 3")
+    local = load(write_job(tmp_path / "local", 2, text))
+    render_job(local, show_progress=False)
+    plain = load(write_job(tmp_path / "plain", 2))
+    render_job(plain, show_progress=False)
+    lit = pixels(local.output.dir, 1)["G"] - pixels(plain.output.dir, 1)["G"]
+    assert np.count_nonzero(lit > 0.5) >= 2  # stars drawn (the rest is path noise)
+
+    frames = load(write_job(tmp_path / "frames", 2, text))
+    result = farm.render_on_dask(frames, client, threads=1)
+    assert sorted(result.rendered) == [1, 2] and not result.failed
+    assert_same_frames(local.output.dir, frames.output.dir, [1, 2])
+
+    still = load(write_job(tmp_path / "still", 1, text))
+    result = farm.render_on_dask(still, client, threads=1, batches=3)
+    assert result.rendered == [1] and not result.failed
+    assert_same_frames(local.output.dir, still.output.dir, [1])
+
+
 def test_sigterm_cancels_a_local_render_cleanly(tmp_path):
     """The add-on's cancel: SIGTERM -> exit 130, a `finish` event, finished frames kept."""
     text = (TINY.replace("width = 16", "width = 96").replace("height = 12", "height = 72")

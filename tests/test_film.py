@@ -511,3 +511,27 @@ def test_merge_adds_the_squares():
     a.merge(b)
     np.testing.assert_allclose(a.sum_sq, whole.sum_sq, rtol=1e-12)
     np.testing.assert_allclose(a.adaptive_error(), whole.adaptive_error(), rtol=1e-9)
+
+
+def test_sample_free_layer_adds_to_the_pixel_means_once():
+    """add_layer: radiance added to the resolved means (not to spp or the errors); merge
+    appends it, a batch without it adds nothing; non-finite splats are dropped."""
+    m = np.array([[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 0.5]])
+    film = Film(3, 2, bands=(400.0, 500.0, 50.0))
+    film.add_samples(np.arange(6), np.ones((6, 3)), np.zeros(6), {},
+                     np.full((6, 4), 450.0), np.full((6, 4), 0.25))
+    with pytest.raises(ValueError):
+        film.add_layer(np.array([1]), np.ones((1, 3)))  # the film has bands
+    film.add_layer(np.array([1, 4, 4, 5]), np.array([[1.0, 2.0, 3.0], [1.0, 1.0, 1.0],
+                                                     [1.0, 1.0, 1.0], [np.nan, 0.0, 0.0]]),
+                   np.array([[1.0, 2.0, 3.0]] * 4))
+    assert film.nonfinite_samples == 1
+    other = Film(3, 2, bands=(400.0, 500.0, 50.0))
+    film.merge(other)
+    img = film.resolve(m)
+    np.testing.assert_allclose(img.rgba[0, 1, :3], m @ [2.0, 3.0, 4.0])
+    np.testing.assert_allclose(img.rgba[1, 1, :3], m @ [3.0, 3.0, 3.0])
+    np.testing.assert_allclose(img.rgba[1, 2, :3], m @ [1.0, 1.0, 1.0])
+    np.testing.assert_allclose(img.spectral[0, 1], [1.0, 2.0 + 1.0 / 50.0, 3.0])
+    np.testing.assert_allclose(img.spectral[1, 1], [2.0, 4.0 + 1.0 / 50.0, 6.0])
+    assert np.all(img.spp == 1)

@@ -143,6 +143,7 @@ CHANGES = {
     "material of an object": ('material = "ball"', 'material = "lamp"'),
     "a light": ("[scene]", "[[lights]]\ntype = \"point\"\nposition = [0.0, 0.0, 3.0]\n[scene]"),
     "background": ("[scene]", "[scene]\nbackground = [0.1, 0.1, 0.1]"),
+    "stars": ("[scene]", "[scene]\nstars = { magnitude_limit = 2.0 }"),
     "output formats": ('formats = ["exr", "png"]', 'formats = ["exr"]'),
     "exposure": ("[output]", "[output]\nexposure = 1.0"),
     "aovs": ("[output]", "[output]\naovs = [\"depth\"]"),

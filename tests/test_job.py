@@ -206,8 +206,8 @@ BAD_JOBS = [
      "step"),
     ("band order", "[output]\nspectral_bands = [700, 400, 10]\n" + SCENE,
      "output.spectral_bands", "below"),
-    ("band range", "[output]\nspectral_bands = [300, 780, 10]\n" + SCENE,
-     "output.spectral_bands", "360"),
+    ("band range", "[output]\nspectral_bands = [100, 780, 10]\n" + SCENE,
+     "output.spectral_bands", "100..10000"),
     ("band steps", "[output]\nspectral_bands = [380, 785, 10]\n" + SCENE,
      "output.spectral_bands", "whole"),
     ("spectral exr in rgb", '[render]\nspectral = "rgb"\n[output]\nformats = ["spectral-exr"]\n'

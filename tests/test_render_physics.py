@@ -609,6 +609,46 @@ def test_moving_blackbody_renders_as_hotter_blackbody(blackbody_renders, name):
     np.testing.assert_allclose(moving.sensor, rest.sensor, rtol=rtol, atol=0)
 
 
+UV_IR_BANDS = [200.0, 5000.0, 200.0]
+
+
+@pytest.mark.parametrize("look, D0", [([1.0, 0.0, 0.0], SQRT3), ([-1.0, 0.0, 0.0], 1 / SQRT3)])
+def test_uv_and_ir_bands_of_a_moving_blackbody(tmp_path, look, D0):
+    """Spectral-exr bands from 100 nm to 5.1 µm (camera frame), far outside the sensor: a
+    5800 K emitter around a camera at β = 0.5 is, band by band, the mean over the band of
+    D⁵ L_lab(Dλ) (= B(λ, D·T) up to the table's normalisation; physics.md, "Skies").
+
+    Expected: the blackbody table looked up at Dλ, times D⁵, averaged over each band by
+    a 400-point midpoint rule (D on the axis; it varies by < 2e-5 over the 0.5° view).
+    Tolerance: 5 standard errors of the pixel mean (pixel-to-pixel scatter of 64 pixels)
+    plus 1e-3 for the quadrature and the table's interpolation. Without UV/IR bands in
+    the sampler every band outside 360–830 nm would be 0; without the Doppler shift the
+    peak would sit at 500 nm instead of 500/D.
+    """
+    W = H = 8
+    job = base_job(render={"width": W, "height": H, "spp": 64},
+                   output={"formats": ["spectral-exr"], "spectral_bands": UV_IR_BANDS},
+                   camera={"look_at": look, "fov": 0.5},
+                   motion={"beta": [B, 0.0, 0.0]},
+                   materials=[{"name": "bb", "emission_blackbody": T_SUN,
+                               "emission_strength": 1.0}],
+                   objects=[enclosing_emitter("bb")])
+    r = render(job, tmp_path)
+    S = r.image.spectral.astype(np.float64).reshape(W * H, -1)
+    centres = r.image.band_centers_nm
+    start, stop, step = UV_IR_BANDS
+    assert len(centres) == 25 and centres[0] == start and centres[-1] == stop
+    table = spectrum.blackbody(T_SUN)
+    k = (np.arange(400) + 0.5) / 400.0
+    expected = np.array([np.mean(D0**5 * spectrum.lookup(table, D0 * (c + (k - 0.5) * step)))
+                         for c in centres])
+    mean = S.mean(axis=0)
+    sem = S.std(axis=0, ddof=1) / math.sqrt(W * H)
+    assert np.all(expected[[0, -1]] > 0.0)  # both ends carry light to measure
+    tol = 5.0 * sem + 1e-3 * expected
+    assert np.all(np.abs(mean - expected) <= tol), np.c_[centres, mean, expected, tol]
+
+
 @pytest.mark.parametrize("name, printed", [("ahead", 10046), ("behind", 3349)])
 def test_blackbody_colour_ahead_behind(blackbody_renders, name, printed):
     """5800 K seen ahead / behind at β = 0.5 has the colour of a 10046 K / 3349 K blackbody.

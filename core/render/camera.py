@@ -65,6 +65,36 @@ class PinholeCamera:
                     np.asarray(col, np.float64), np.asarray(row, np.float64), out)
         return out
 
+    def project(self, d_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The inverse of :meth:`directions_cam`: continuous pixel coordinates (col, row)
+        of camera-frame viewing directions (N, 3), and where each lies in front of the
+        camera (forward component > 0; elsewhere col, row are meaningless).
+
+        With camera coordinates (x_c, y_c, z_f) = (right, up, forward)·d and the image
+        plane at unit distance, x = x_c/z_f, y = y_c/z_f:
+        col = (W/2)(x/tan(fov/2) − 2 shift_x scale)/aspect + W/2,
+        row = (H/2)(1 + 2 shift_y scale − y/tan(fov/2)).
+        """
+        tan_half, aspect, scale, sx, sy = self.window()
+        cam = np.asarray(d_cam, np.float64) @ self.rotation  # (right, up, backward)
+        front = cam[:, 2] < 0.0
+        z = np.where(front, -cam[:, 2], 1.0)
+        x, y = cam[:, 0] / z, cam[:, 1] / z
+        col = 0.5 * self.width * ((x / tan_half - 2.0 * sx * scale) / aspect + 1.0)
+        row = 0.5 * self.height * (1.0 + 2.0 * sy * scale - y / tan_half)
+        return col, row, front
+
+    def pixel_solid_angle(self, col: np.ndarray, row: np.ndarray) -> np.ndarray:
+        """dΩ/d(pixel area) at continuous pixel positions: the solid angle of one pixel
+        there, (2 tan(fov/2)/H)² cos³θ with θ the angle from the optical axis (the image
+        plane at unit distance: dΩ = cos³θ dA). A point source of flux F seen at (col,
+        row) is the pixel mean radiance F / this, as the film's box filter averages it."""
+        tan_half, aspect, scale, sx, sy = self.window()
+        x = ((2.0 * np.asarray(col) / self.width - 1.0) * aspect + 2.0 * sx * scale) * tan_half
+        y = ((1.0 - 2.0 * np.asarray(row) / self.height) + 2.0 * sy * scale) * tan_half
+        cos3 = (1.0 + x * x + y * y) ** -1.5
+        return (2.0 * tan_half / self.height) ** 2 * cos3
+
     def primary_rays(self, beta: np.ndarray, keys: np.ndarray, pixels: np.ndarray,
                      origin_local: np.ndarray, radius: float):
         """The camera stage of a wavefront, fused in one kernel.

@@ -101,6 +101,16 @@ Clamp (``render.clamp`` = C > 0; Cycles' "Clamp Direct/Indirect")
     grows; the adaptive-sampling error is that of the clamped samples. C = 0 (the
     default) skips it: the film then sees bit-identical samples.
 
+Sample-free layer (the stars, core/render/starfield.py)
+    Radiance that no path sample carries, computed once per frame: :meth:`add_layer`
+    keeps a sparse list of splats, ``layer_pixel[k]``, ``layer_sensor[k, c]`` (sensor
+    values) and ``layer_band[k, b]`` (mean band radiance), as a pixel's mean would be
+    (memory in proportion to the splats, not to the image). :meth:`Film.resolve` adds
+    their per-pixel sums (:meth:`Film.layer_sums`) to the pixels' means
+    (``rgb = M · (m + layer)``). The layer is not clamped and is no part of the noise
+    estimates or ``spp``. A frame split into sample batches carries it in the batch that
+    starts at sample 0 only, so :meth:`Film.merge` simply appends the other's splats.
+
 Finite outputs
     A sample with any non-finite value (sensor, alpha, an AOV, a hero wavelength or lane
     weight) is dropped whole in :meth:`Film.add_samples` and counted in
@@ -327,6 +337,9 @@ class Film:
         self.sum_aov = np.zeros((n, col), np.float64)
         self.count = np.zeros(n, np.int64)
         self.sum_band = np.zeros((n, nb), np.float64)
+        self.layer_pixel = np.zeros(0, np.int64)
+        self.layer_sensor = np.zeros((0, 3), np.float64)
+        self.layer_band = np.zeros((0, nb), np.float64)
         self.nonfinite_samples = 0
         """Samples dropped by :meth:`add_samples` because a value was non-finite."""
 
@@ -424,6 +437,39 @@ class Film:
             )
         )
 
+    def add_layer(self, pixel: np.ndarray, sensor: np.ndarray,
+                  bands: np.ndarray | None = None) -> None:
+        """Add sample-free radiance (module docstring, "Sample-free layer"): ``sensor``
+        (K, 3) sensor values and, when the film has bands, ``bands`` (K, nb) mean band
+        radiance, to the pixels ``pixel`` (K,) (repeats add up). Rows with a non-finite
+        value are dropped and counted in :attr:`nonfinite_samples`."""
+        pixel = np.asarray(pixel, np.int64).reshape(-1)
+        sensor = np.asarray(sensor, np.float64).reshape(len(pixel), 3)
+        if len(pixel) and (int(pixel.min()) < 0 or int(pixel.max()) >= self.num_pixels):
+            raise ValueError("add_layer: pixel index outside the film")
+        ok = np.isfinite(sensor).all(axis=1)
+        band = None
+        if self.num_bands:
+            if bands is None:
+                raise ValueError("add_layer: the film has bands; bands needed")
+            band = np.asarray(bands, np.float64).reshape(len(pixel), self.num_bands)
+            ok &= np.isfinite(band).all(axis=1)
+        self.nonfinite_samples += int(np.count_nonzero(~ok))
+        self.layer_pixel = np.concatenate([self.layer_pixel, pixel[ok]])
+        self.layer_sensor = np.concatenate([self.layer_sensor, sensor[ok]])
+        if band is not None:
+            self.layer_band = np.concatenate([self.layer_band, band[ok]])
+
+    def layer_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        """The sample-free layer per pixel: sensor values (num_pixels, 3) and band
+        radiance (num_pixels, nb), float64 (splats in one pixel add up, in order)."""
+        sensor = np.zeros((self.num_pixels, 3))
+        band = np.zeros((self.num_pixels, self.num_bands))
+        np.add.at(sensor, self.layer_pixel, self.layer_sensor)
+        if self.num_bands:
+            np.add.at(band, self.layer_pixel, self.layer_band)
+        return sensor, band
+
     def _stack_aovs(
         self, aov: dict[str, np.ndarray] | None, n_in: int, dtype: np.dtype
     ) -> np.ndarray:
@@ -456,6 +502,9 @@ class Film:
         self.sum_aov += other.sum_aov
         self.count += other.count
         self.sum_band += other.sum_band
+        self.layer_pixel = np.concatenate([self.layer_pixel, other.layer_pixel])
+        self.layer_sensor = np.concatenate([self.layer_sensor, other.layer_sensor])
+        self.layer_band = np.concatenate([self.layer_band, other.layer_band])
         self.nonfinite_samples += other.nonfinite_samples
 
     # ------------------------------------------------------------------ resolving
@@ -534,8 +583,9 @@ class Film:
                 out[nf] = 0.0
             return out
 
+        layer_sensor, layer_band = self.layer_sums()
         with np.errstate(over="ignore", invalid="ignore"):
-            rgb = self._mean(self.sum_sensor) @ m.T  # (n, 3)
+            rgb = (self._mean(self.sum_sensor) + layer_sensor) @ m.T  # (n, 3)
         rgba = np.empty((h, w, 4), np.float32)
         rgba[..., :3] = finite32(rgb.reshape(h, w, 3))
         rgba[..., 3] = finite32(self._mean(self.sum_alpha).reshape(h, w))
@@ -548,7 +598,8 @@ class Film:
         spectral = None
         if self.num_bands:
             step = self.bands[2]
-            spectral = finite32((self._mean(self.sum_band) / step).reshape(h, w, self.num_bands))
+            spectral = finite32((self._mean(self.sum_band) / step + layer_band)
+                                .reshape(h, w, self.num_bands))
         if bad:
             log.warning("%d output values exceed float32's range (3.4e38) and were set to 0",
                         bad)

@@ -45,6 +45,7 @@ from .lights import LightTable, build_lights
 from .materials import SpectralTables, build_tables
 from .rest_frames import GroupAccel, MovingScene
 from .sampling import path_keys, progressive_offsets
+from .starfield import occlusion_test, star_splats
 from .textures import (
     TextureTable,
     build_textures,
@@ -257,6 +258,8 @@ class FrameRenderer:
         if not 0 <= s_lo < s_hi <= s.spp:
             raise ValueError(f"sample range {samples} is not inside [0, {s.spp})")
         film = Film(s.width, s.height, aovs=self.aovs, bands=self.bands)
+        if s_lo == 0:  # once per frame: a batch split merges it once (film.py)
+            self._add_stars(event, film)
         stats = FrameStats()
         lock = threading.Lock()
         t0 = time.perf_counter()
@@ -305,6 +308,24 @@ class FrameRenderer:
                             break
         stats.seconds = time.perf_counter() - t0
         return film, stats
+
+    def _add_stars(self, event: relativity.ShutterEvent, film: Film) -> None:
+        """The scene's stars as the film's sample-free layer (core/render/starfield.py);
+        nothing without stars, and none on a transparent film (the sky is not seen)."""
+        stars = self.prep.scene.stars
+        if stars is None or len(stars) == 0 or self.settings.transparent:
+            return
+        camera = self.camera if event.rotation is None else \
+            replace(self.camera, rotation=event.rotation)
+        bands = None
+        if film.num_bands:
+            bands = (film.band_centers_nm, film.bands[2])
+        prep = self.prep
+        splats = star_splats(stars, camera, event.beta, mode=prep.mode, doppler=self.doppler,
+                             searchlight=self.searchlight, bands=bands,
+                             blocked=occlusion_test(prep.tracer, prep.origin, prep.radius,
+                                                    event))
+        film.add_layer(splats.pixel, splats.sensor, splats.bands)
 
     def _trace_chunk(self, event, frame, pixels, s0, s1, film, lock, stats):
         s = self.settings

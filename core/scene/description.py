@@ -43,10 +43,11 @@ MAX_EXPOSURE_STOPS = 64.0
 
 __all__ = ["SPECTRAL_MODES", "OUTPUT_FORMATS", "AOV_NAMES", "DEFAULT_AOVS", "AOV_COMPONENTS",
            "aov_components", "MOTION_MODES", "SHAPES",
-           "LIGHT_TYPES", "MAX_ABS_NUMBER", "AUTO_EXPOSURE", "MAX_EXPOSURE_STOPS", "frozen",
+           "LIGHT_TYPES", "STAR_CATALOGUES", "MAX_ABS_NUMBER", "AUTO_EXPOSURE",
+           "MAX_EXPOSURE_STOPS", "frozen",
            "RenderSettings", "OutputSettings",
            "CameraSettings", "MotionSettings", "MaterialSpec", "ObjectSpec", "LightSpec",
-           "SceneSpec", "Job"]
+           "StarsSettings", "SceneSpec", "Job"]
 
 
 def aov_components(name: str) -> int:
@@ -335,6 +336,23 @@ class LightSpec:
     up: np.ndarray | None = None
 
 
+#: ``scene.stars.catalog`` values (core/scene/stars.py reads them).
+STAR_CATALOGUES = ("hipparcos",)
+
+
+@dataclass(frozen=True)
+class StarsSettings:
+    """``scene.stars``: point-like stars at infinity in the lab (physics.md, "Skies").
+
+    ``catalog``: one of :data:`STAR_CATALOGUES`; ``magnitude_limit``: stars fainter
+    than this (as seen at rest) are dropped; ``brightness`` (>= 0) scales every star's
+    flux (1: the photometric zero point of :mod:`..physics.starlight`)."""
+
+    catalog: str = "hipparcos"
+    magnitude_limit: float = 8.0
+    brightness: float = 1.0
+
+
 @dataclass(frozen=True)
 class SceneSpec:
     """The ``[scene]`` table plus the materials, objects and lights (includes merged)."""
@@ -345,6 +363,7 @@ class SceneSpec:
     objects: tuple[ObjectSpec, ...]
     lights: tuple[LightSpec, ...]
     includes: tuple[Path, ...] = ()
+    stars: StarsSettings | None = None
 
 
 @dataclass(frozen=True)

@@ -86,6 +86,7 @@ from .description import (
     ObjectSpec,
 )
 from .footprint import check_memory
+from .stars import StarField, star_field
 from .worldlines import VelocityGroup
 
 log = logging.getLogger("relray")
@@ -120,6 +121,8 @@ class Scene:
     # the area lights' quads: the last ``light_triangles`` of the static triangles,
     # triangles[n_geometry:n_static]; lights, not geometry (no BVH: no shadow, no back)
     light_triangles: int = 0
+    # the sky's stars (``scene.stars``, core/scene/stars.py), None without any
+    stars: StarField | None = None
     # float32 (T, 3, 2): the texture coordinates of each triangle's corners (job-format.md
     # "Textures": (0, 0) the image's bottom-left); zeros where a mesh has none. None only
     # from callers that bring no UVs (then every triangle has zeros)
@@ -379,10 +382,13 @@ def build_scene(job: Job) -> Scene:
     if groups:
         tri_group = np.concatenate([np.full(len(p.triangles), p.group, np.int32)
                                     for p in parts])
-    return scene_from_parts(triangles, normals, material_ids, materials,
-                            [*lights, *job.scene.lights], job.scene.background, camera,
-                            file=job.path, named_parts=named, tri_group=tri_group,
-                            groups=tuple(groups), uvs=uvs)
+    scene = scene_from_parts(triangles, normals, material_ids, materials,
+                             [*lights, *job.scene.lights], job.scene.background, camera,
+                             file=job.path, named_parts=named, tri_group=tri_group,
+                             groups=tuple(groups), uvs=uvs)
+    if job.scene.stars is not None:
+        scene.stars = star_field(job.scene.stars)
+    return scene
 
 
 def _gltf_parts(gl: gltf.GltfScene, group_of: Sequence[int],

@@ -81,6 +81,7 @@ from .description import (
     OutputSettings,
     RenderSettings,
     SceneSpec,
+    StarsSettings,
     TextureSpec,
     ViewTransform,
     Worldline,
@@ -105,9 +106,9 @@ from .schema import (  # noqa: F401  (the limits are part of this module's API)
     MIN_BAND_STEP_NM,
     MIN_LINE_SIGMA_REL,
     ROTATION_TOL,
-    SENSOR_RANGE_NM,
     given,
 )
+from .stars import star_count
 from .view_transform import ocio_problem
 
 # ------------------------------------------------------------- cross-key errors
@@ -601,6 +602,9 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         if inc.scene.file is not None:
             raise sctx.error("include", f"{inc_path} names a scene.file; only the including "
                              "job may name a glTF file")
+        if inc.scene.stars is not None:
+            raise sctx.error("include", f"{inc_path} sets scene.stars; only the including "
+                             "job may set the sky's stars")
         for m in inc.scene.materials:
             if m.name in origin:
                 raise sctx.error("include", f"material '{m.name}' of {inc_path} is already "
@@ -635,7 +639,16 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         objects=tuple(objects),
         lights=tuple(lights),
         includes=tuple(includes),
+        stars=_stars(s.stars),
     )
+
+
+def _stars(st: schema.Stars | None) -> StarsSettings | None:
+    """``scene.stars`` (every rule is the key's own, checked by the schema)."""
+    if st is None:
+        return None
+    return StarsSettings(catalog=st.catalog, magnitude_limit=float(st.magnitude_limit),
+                         brightness=float(st.brightness))
 
 
 # -------------------------------------------------------------------- entry points
@@ -874,6 +887,10 @@ def job_summary(job: Job) -> str:
         f"scene       {s.file if s.file else 'no glTF file'}, {len(s.materials)} materials, "
         f"{len(s.objects)} objects, {len(s.lights)} lights, background {_fmt_vec(s.background)}"
     )
+    if s.stars is not None:
+        st = s.stars
+        lines.append(f"  stars     {star_count(st)} of the {st.catalog} catalogue to magnitude "
+                     f"{st.magnitude_limit:g}, brightness {st.brightness:g}")
     for inc in s.includes:
         lines.append(f"  include   {inc}")
     index, groups, _ = worldlines.rest_frame_offsets(list(s.objects))

@@ -66,6 +66,7 @@ from pydantic.fields import FieldInfo
 from pydantic_core import PydanticCustomError
 
 from ..errors import UserError
+from ..physics.spectrum import BANDS_RANGE_NM
 from . import shapes
 from .description import (
     AOV_NAMES,
@@ -78,6 +79,7 @@ from .description import (
     OUTPUT_FORMATS,
     SHAPES,
     SPECTRAL_MODES,
+    STAR_CATALOGUES,
 )
 
 # ----------------------------------------------------------------------- limits
@@ -102,7 +104,6 @@ LINE_RANGE_NM = (1.0, 1.0e5)
 MIN_LINE_SIGMA_REL = 1e-6
 #: Narrowest spectral band (nm): keeps the band count, and the film, bounded.
 MIN_BAND_STEP_NM = 0.1
-SENSOR_RANGE_NM = (360.0, 830.0)
 #: Tolerance of the orthonormality check of camera rotations and matrices.
 ROTATION_TOL = 1e-4
 DEFAULT_CAMERA_POSITION = (0.0, -3.9, 1.0)
@@ -234,13 +235,13 @@ def _frames_rule(v: list[int]) -> list[int]:
 
 def _bands_rule(v: list[float]) -> list[float]:
     start, stop, step = v
-    lo, hi = SENSOR_RANGE_NM
+    lo, hi = BANDS_RANGE_NM
     if step < MIN_BAND_STEP_NM:
         raise _fail(f"step must be >= {MIN_BAND_STEP_NM:g} nm (got {step:g})")
     if start >= stop:
         raise _fail(f"start {start:g} must be below stop {stop:g}")
-    if start < lo or stop > hi:
-        raise _fail(f"bands must lie within {lo:g}..{hi:g} nm")
+    if start - step / 2 < lo or stop + step / 2 > hi:
+        raise _fail(f"bands (with their half steps) must lie within {lo:g}..{hi:g} nm")
     n = (stop - start) / step
     if abs(n - round(n)) > 1e-6 * max(1.0, n):
         raise _fail("stop - start must be a whole number of steps")
@@ -394,8 +395,9 @@ class Output(Table):
                                     "Repeats are dropped.")
     spectral_bands: _vec(3, Number, AfterValidator(_bands_rule),
                          expect="an array of 3 numbers (start, stop, step)") = Field(
-        [380.0, 780.0, 10.0], description="nm: start, stop, step of the spectral-exr bands; "
-                                          "inside 360..830, step ≥ 0.1, whole steps.")
+        [380.0, 780.0, 10.0], description="nm: start, stop, step of the spectral-exr bands "
+                                          "(camera frame); with their half steps inside "
+                                          "100..10000 (UV to IR), step ≥ 0.1, whole steps.")
     aovs: Annotated[list[_choice(AOV_NAMES)], Expect("an array of strings")] = Field(
         list(DEFAULT_AOVS), description="Extra EXR layers (Depth.Z, Doppler.D, LabTime.T, "
                                         "Albedo.R/G/B, Normal.X/Y/Z: the denoising albedo "
@@ -491,6 +493,21 @@ class MotionProfile(Table):
     motion: Motion
 
 
+class Stars(Table):
+    """``scene.stars``: the stars of a catalogue, point sources at infinity in the lab."""
+
+    catalog: _choice(STAR_CATALOGUES) = Field(
+        "hipparcos", description="Star catalogue: hipparcos (ESA Hipparcos-2, 117,955 "
+                                 "stars; equatorial axes: +Z north pole, +X towards RA 0h, "
+                                 "+Y towards 6h).")
+    magnitude_limit: Annotated[Number, Field(ge=-30.0, le=30.0)] = Field(
+        8.0, description="Drop stars fainter than this magnitude (as seen at rest); 8 keeps "
+                         "about 37,600 stars, 6 (the naked eye) about 4,600.")
+    brightness: NonNegative = Field(
+        1.0, description="Scales every star's flux; at 1 a magnitude-0 star carries the "
+                         "luminous flux of 2.5e-4 sr of luminance-1 sky (physics.md).")
+
+
 class Scene(Table):
     """``[scene]``: a glTF file, the sky, included job files."""
 
@@ -506,6 +523,10 @@ class Scene(Table):
                        Expect("a file name or an array of file names")] = Field(
         None, description="Job files (.toml, relative to this one) whose materials, objects "
                           "and lights come first; no cycles, no scene.file in them.")
+    stars: Stars = Field(
+        None, description="Stars of a catalogue, drawn as sharp points where the camera "
+                          "sees the sky (aberrated, Doppler-shifted and beamed); they light "
+                          "nothing. Absent: no stars.")
 
 
 class Spectrum(Table):
@@ -1209,7 +1230,7 @@ def markdown() -> str:
         ("[motion]", Motion, ()), ("motion.keyframes entries", Keyframe, ()),
         ("motion.events entries", CameraEvent, ()),
         ("output.view_transform", ViewTransformTable, ()),
-        ("[scene]", Scene, ()), ("[[materials]]", Material, ()),
+        ("[scene]", Scene, ()), ("scene.stars", Stars, ()), ("[[materials]]", Material, ()),
         ("materials.emission_spectrum", Spectrum, ()),
         ("[[objects]], every shape", Object, ()),
     ]
@@ -1259,7 +1280,7 @@ RULES = (
     "scene files exist and have a known suffix; `smooth` is not for glTF meshes.",
     "`lights`: an area light's `up` is not parallel to its `direction`.",
     "`scene`: `scene.file` or at least one `[[objects]]` entry; included files are "
-    "complete jobs without `scene.file`, without cycles.",
+    "complete jobs without `scene.file` and without `scene.stars`, without cycles.",
 )
 
 
