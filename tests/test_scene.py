@@ -422,3 +422,21 @@ def test_nan_uvs_are_a_user_error(tmp_path: Path) -> None:
     with pytest.raises(UserError, match="not finite") as e:
         build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "t.obj"\nmaterial = "m"\n')
     assert e.value.key == "objects[0].file"
+
+
+def test_textured_mesh_without_uvs_warns_once(tmp_path: Path, caplog) -> None:
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(str(tmp_path / "t.png"))
+    out.open(str(tmp_path / "t.png"), oiio.ImageSpec(2, 2, 3, "uint8"))
+    out.write_image(np.zeros((2, 2, 3), np.uint8))
+    out.close()
+    (tmp_path / "m.obj").write_text(OBJ)
+    (tmp_path / "job.toml").write_text(
+        '[[materials]]\nname = "t"\nbase_color_texture = "t.png"\n'
+        + '[[objects]]\nshape = "mesh"\nfile = "m.obj"\nmaterial = "t"\n' * 2)
+    with caplog.at_level(logging.WARNING, logger="relray"):
+        scene.build_scene(job.load_job(tmp_path / "job.toml"))
+    warnings = [r.getMessage() for r in caplog.records if "no texture coordinates" in
+                r.getMessage()]
+    assert len(warnings) == 1 and "objects[0]" in warnings[0]

@@ -456,3 +456,40 @@ def test_bad_texture_input_is_one_line_exit_2_nothing_written(tmp_path, case, ke
     assert len(lines) == 1 and key in lines[0] and str(job) in lines[0], r.stderr
     assert lines[0].startswith("relray: error:")
     assert not (tmp_path / "out").exists()
+
+
+def test_gltf_base_color_texture_times_its_factor(tmp_path):
+    """A glTF quad whose baseColorTexture (a constant 8-bit sRGB PNG, decoded to the
+    linear ρ) is multiplied by baseColorFactor 0.5 (glTF: the factor multiplies the
+    texture), lit by the sun along its normal: L = 0.5 ρ E/π (rgb mode: exact)."""
+    import pygltflib as g
+    from test_gltf import QUAD_IDX, GlbBuilder
+
+    h = 10.0 * math.tan(math.radians(FOV) / 2)
+    # relray z = 0 is glTF's y = 0 (Y-up: (x, y, z)_glTF -> (x, -z, y))
+    pos = np.array([[-h, 0, h], [h, 0, h], [h, 0, -h], [-h, 0, -h]], np.float32)
+    uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    srgb = 0.7
+    write_image(tmp_path / "c.png", np.full((4, 4, 3), srgb, np.float32), "uint8")
+    rho = ((round(srgb * 255) / 255 + 0.055) / 1.055) ** 2.4  # sRGB decoding
+    b = GlbBuilder()
+    pa = b.add(pos, g.FLOAT, g.VEC3)
+    ta = b.add(uv, g.FLOAT, g.VEC2)
+    ia = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
+                 meshes=[g.Mesh(primitives=[g.Primitive(
+                     attributes=g.Attributes(POSITION=pa, TEXCOORD_0=ta), indices=ia,
+                     material=0)])],
+                 materials=[g.Material(pbrMetallicRoughness=g.PbrMetallicRoughness(
+                     baseColorFactor=[0.5, 0.5, 0.5, 1.0], metallicFactor=0.0,
+                     roughnessFactor=1.0, baseColorTexture=g.TextureInfo(index=0)))],
+                 textures=[g.Texture(source=0)], images=[g.Image(uri="c.png")])
+    b.finish(gl, tmp_path / "q.glb")
+    job = lit_quad_job(tmp_path, {"base_color": [0, 0, 0]})
+    job["objects"] = []
+    job["materials"] = []
+    job["scene"] = {"file": "q.glb", "background": [0, 0, 0]}
+    r = render(job, tmp_path)
+    mean, sigma = image_mean_and_sigma(r)
+    want = 0.5 * rho * 2.0 / math.pi
+    assert np.all(np.abs(mean - want) <= 5 * sigma + 1e-6), (mean, want)

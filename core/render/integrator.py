@@ -33,6 +33,16 @@ next-event estimation (whose shadow ray no light blocks) as for BSDF sampling, w
 keeps the MIS weights summing to 1. Scenes without area lights never call it
 (``area_tris`` is empty), so they run the kernels they ran before.
 
+Textures (:mod:`.textures`).  A material with any image texture (``KernelScene.tex``'s
+``mat_flag``) reads its texels at the hit, at the triangle's interpolated UV and the
+level of detail of the path's ray cone (``Paths.cone``: width and spread angle, started
+by :func:`trace` from the pixel's lab spread angle, widened by :func:`.textures.bounce_spread`
+at each bounce): the base colour's spectrum per lane replaces ρ(λ), roughness and
+metallic maps replace α and the lobe weights, a normal map tilts the shading normal, and
+an emission texture adds its texel's radiance (weight 1: such a material is no light of
+next-event estimation). Other materials take exactly the code path they took before; a
+scene without textures does not touch the cones.
+
 Denoising features (the ``albedo`` and ``normal`` AOVs; :class:`Features`, only when
 asked for: ``trace(..., features=True)``).  As Cycles' "Denoising Albedo" and "Denoising
 Normal" passes (intern/cycles/kernel/film/denoising_passes.h,

@@ -655,6 +655,9 @@ def _material(doc_mat: dict[str, Any], index: int,
         if isinstance(normal, dict):
             tex["normal_scale"] = _factor(normal.get("scale"), [1.0],
                                           f"{where}.normalTexture.scale", -1e15, 1e15)[0]
+        if doc_mat.get("alphaMode", "OPAQUE") != "OPAQUE":
+            log.warning("glTF %s: alphaMode %s is not supported (the surface is opaque)",
+                        where, doc_mat.get("alphaMode"))
         if "occlusionTexture" in doc_mat:
             log.warning("glTF %s: occlusionTexture is ignored (a path tracer computes "
                         "occlusion)", where)
