@@ -493,3 +493,28 @@ def test_gltf_base_color_texture_times_its_factor(tmp_path):
     mean, sigma = image_mean_and_sigma(r)
     want = 0.5 * rho * 2.0 / math.pi
     assert np.all(np.abs(mean - want) <= 5 * sigma + 1e-6), (mean, want)
+
+
+def test_emission_texture_is_an_rgb_emitter(tmp_path):
+    """A quad with a constant emission texel (0.6, 0.3, 0.1) filling the view, seen
+    directly (cie1931, at rest): its colour is the texel's (an RGB emitter is scale · s(λ)
+    · D65_ext(λ), whose colour is rgb), within 5σ plus the table's 1 % (ΔE00 < 0.5), and
+    equal to a constant ``emission`` of the same colour within their errors."""
+    rgb = np.array([0.6, 0.3, 0.1])
+    write_image(tmp_path / "e.exr", np.tile(rgb.astype(np.float32), (4, 4, 1)))
+    h = 10.0 * math.tan(math.radians(FOV) / 2)
+    corners = [[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]]
+
+    def job(mat):
+        return base_job(render={"width": 16, "height": 16, "spp": 16, "max_depth": 1},
+                        camera={"position": [0, 0, 10], "look_at": [0, 0, 0],
+                                "up": [0, 1, 0], "fov": FOV},
+                        materials=[{"name": "e", "base_color": [0, 0, 0],
+                                    "emission_strength": 2.0, **mat}],
+                        objects=[{"shape": "quad", "material": "e", "corners": corners}])
+    tex = render(job({"emission_texture": "e.exr"}), tmp_path)
+    const = render(job({"emission": rgb.tolist()}), tmp_path)
+    m_t, s_t = image_mean_and_sigma(tex)
+    m_c, s_c = image_mean_and_sigma(const)
+    assert np.all(np.abs(m_t - 2 * rgb) <= 5 * s_t + 0.01 * 2 * rgb), (m_t, 2 * rgb)
+    assert np.all(np.abs(m_t - m_c) <= 5 * np.hypot(s_t, s_c) + 0.01 * 2 * rgb), (m_t, m_c)
