@@ -224,7 +224,8 @@ def write(out: Path, md: Path) -> Path:
         "throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
         "convergence_medians", "equal_error", "converged_compare", "adaptive_gain",
         "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups",
-        "moving_emitter_noise", "environment_nee", "first_render", "viewport_first")}
+        "moving_emitter_noise", "environment_nee", "first_render", "viewport_first",
+        "textures", "textures_baseline")}
     conv_cfg = meta.get("sections", {}).get("convergence", {}).get("config")
     if d["convergence_medians"] and conv_cfg:
         # derived tables: recomputed from the medians, so they follow this module's rules
@@ -358,6 +359,7 @@ def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
     _section_moving(add, d)
     _section_first(add, d)
     _section_environment(add, d)
+    _section_textures(add, d)
     _section_profile(add, d, plots, md, meta)
     _section_recommendations(add, d)
     _section_missing(add, d, meta)
@@ -804,6 +806,38 @@ def _section_environment(add, d) -> None:
                 f"{lb['cpu_s'] / ln['cpu_s']:.1f}× the CPU time of NEE's largest "
                 f"({ln['spp']:.0f} spp) and has {lb['rel_mse'] / ln['rel_mse']:.0f}× its "
                 "relative MSE.\n")
+def _section_textures(add, d) -> None:
+    add("## 5e. Textures: their cost\n")
+    rows = d["textures"]
+    if not rows:
+        add("Not run.\n")
+        return
+    r0 = rows[0]
+    add(f"Cornell box {r0['size']:.0f}², {r0['spp']:.0f} spp, {r0['threads']:.0f} "
+        f"thread(s), paths per CPU-second, median of {r0['rounds']:.0f} alternated renders "
+        "(`bench/textures.py`). *Textured*: the white surfaces with a 512² sRGB checker "
+        "(repeated 4×), a 256² roughness map and a 256² flat normal map, the red and green "
+        "walls with a 256² colour noise: every hit but the light's reads 1 to 3 textures "
+        "(trilinear, two mip levels) and turns a texel's colour into its spectrum per "
+        "hero wavelength (the 8 table nodes' sigmoids, `rgb_table.cell_reflectance`).\n")
+    add(table(rows, [("variant", "variant", ""),
+                     ("M paths/CPU-s", lambda r: r["paths_per_cpu_s"] / 1e6, ".3f"),
+                     ("÷ untextured", "over_untextured", ".3f")]))
+    add("")
+    ab = d["textures_baseline"]
+    if ab:
+        a0 = ab[0]
+        add("**Scenes without textures** pay one load and branch per hit (the material's "
+            "texture flag) and nothing else (no ray cones: `TextureTable.enabled` is off). "
+            f"presets/cornell.toml, {a0['spp']:.0f} spp, 1 thread, `bench/throughput.py` "
+            "with this code and with the code before textures (`bench/textures.py "
+            f"--baseline`), alternated, median of {a0['rounds']:.0f}; the runs scatter by "
+            "±10 % on this shared machine:\n")
+        add(table(ab, [("code", "code", ""),
+                       ("M paths/CPU-s", lambda r: r["paths_per_cpu_s"] / 1e6, ".3f"),
+                       ("÷ before", "over_before", ".3f"),
+                       ("runs (paths/CPU-s)", "runs", "")]))
+        add("")
 
 
 def _section_moving(add, d) -> None:

@@ -32,12 +32,13 @@ from relray.bench import (
     first_render,
     report,
     skips,
+    textures,
     throughput,
     velocity_groups,
 )
 
 SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "environment",
-            "first", "convergence")
+            "textures", "first", "convergence")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -71,6 +72,9 @@ class Plan:
     env_bsdf_spp: tuple[int, ...] = (16, 64, 256, 1024)
     env_ref_spp: int = 2048
     env_repeat: int = 2
+    tex_size: int = 128
+    tex_spp: int = 16
+    tex_rounds: int = 3
     first_render: bool = True  # three Blender sessions, two of them compiling kernels
     anim_frames: int = 24
     anim_separate: int = 24
@@ -87,7 +91,7 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
              beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
              moving_size=64, moving_spp=8, moving_repeat=2, env_size=(48, 32),
              env_spp=(4, 16), env_bsdf_spp=(16, 256), env_ref_spp=512, env_repeat=1,
-             first_render=False,
+             tex_size=64, tex_spp=8, tex_rounds=2, first_render=False,
              anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
              conv=convergence.ConvergenceConfig(width=64, height=64,
                                                 spp=[4, 8, 16, 32, 64, 128],
@@ -98,8 +102,8 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
              skip_spp=2, skip_ref_spp=4, skip_repeat=1, moving_size=8, moving_spp=2,
              moving_repeat=1, env_size=(8, 8), env_spp=(1, 2), env_bsdf_spp=(2, 4),
-             env_ref_spp=8, env_repeat=1, first_render=False, anim_frames=0,
-             anim_separate=0,
+             env_ref_spp=8, env_repeat=1, tex_size=8, tex_spp=1, tex_rounds=1,
+             first_render=False, anim_frames=0, anim_separate=0,
              anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
              conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
                                                 thresholds=[0.5], repeats=1, ref_factor=2))
@@ -208,6 +212,11 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
             *plan.env_size, list(plan.env_spp), list(plan.env_bsdf_spp), plan.env_ref_spp,
             threads, plan.env_repeat))
         done("environment")
+    if "textures" in sections:
+        section("textures")
+        cm.write_csv(out / "textures.csv", textures.rows(plan.tex_spp, plan.tex_size,
+                                                         threads, plan.tex_rounds))
+        done("textures")
     if "first" in sections and plan.first_render:
         section("first")
         cm.write_csv(out / "first_render.csv", first_render.rows())

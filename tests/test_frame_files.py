@@ -271,6 +271,21 @@ def test_the_digest_covers_every_input_file(tmp_path: Path) -> None:
     assert all(p.is_absolute() for p in files)
 
 
+def test_the_digest_covers_texture_images(tmp_path: Path) -> None:
+    """A material's texture image is an input file (a changed image renders again), the
+    job file it is named in is not (its content is in the digest already)."""
+    (tmp_path / "t.png").write_bytes(b"png")
+    job = tmp_path / "job.toml"
+    job.write_text('[[materials]]\nname = "m"\nbase_color_texture = "t.png"\n'
+                   '[[objects]]\nshape = "sphere"\ncenter = [0, 0, 0]\nradius = 1\n'
+                   'material = "m"\n')
+    loaded = jobmod.load_job(job)
+    assert [p.name for p in digest.input_files(loaded)] == ["t.png"]
+    before = digest.job_digest(loaded)
+    (tmp_path / "t.png").write_bytes(b"png2")
+    assert digest.job_digest(jobmod.load_job(job)) != before
+
+
 @pytest.mark.parametrize("what", ["version", "kernel source", "library version"])
 def test_a_changed_renderer_makes_every_frame_stale(rendered: Path, monkeypatch,
                                                     what: str) -> None:

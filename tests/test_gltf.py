@@ -632,3 +632,82 @@ def test_a_moving_gltf_node_renders_in_its_own_velocity_group(tmp_path: Path) ->
     np.testing.assert_allclose(scene.groups[0].segments[0].p_ref, [0.0, 5.0, 0.0])
     # node 1's triangle at world (x, -z, y) = (.., 5, ..) sits about its pivot
     np.testing.assert_allclose(scene.triangles[1][:, 1], 0.0, atol=1e-12)
+
+
+def _uv_quad(path: Path, uv: np.ndarray) -> Path:
+    b = GlbBuilder()
+    pos = b.add(QUAD_POS, g.FLOAT, g.VEC3)
+    tex = b.add(uv.astype(np.float32), g.FLOAT, g.VEC2)
+    idx = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
+                 meshes=[g.Mesh(primitives=[g.Primitive(
+                     attributes=g.Attributes(POSITION=pos, TEXCOORD_0=tex), indices=idx)])])
+    return b.finish(gl, path)
+
+
+def test_texcoord_0_is_read_with_v_flipped(tmp_path):
+    """glTF's UV origin is the image's top-left; relray's (Blender's) its bottom-left."""
+    uv = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.5], [0.0, 0.25]])
+    s = gltf.load_gltf_scene(_uv_quad(tmp_path / "uv.glb", uv))
+    want = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)[QUAD_IDX.reshape(2, 3)]
+    np.testing.assert_allclose(s.uvs, want)
+    no_uv = gltf.load_gltf_scene(build_test_glb(tmp_path / "t.glb"))
+    assert no_uv.uvs.shape == (len(no_uv.triangles), 3, 2) and not no_uv.uvs.any()
+
+
+def test_nan_texcoord_is_a_user_error(tmp_path):
+    uv = np.array([[0.0, 0.0], [np.nan, 0.0], [1.0, 0.5], [0.0, 0.25]])
+    with pytest.raises(UserError, match="TEXCOORD_0 is not finite"):
+        gltf.load_gltf_scene(_uv_quad(tmp_path / "nan.glb", uv), key="scene.file",
+                             job_file=tmp_path / "job.toml")
+
+
+def test_material_textures_factors_samplers_and_transform(tmp_path):
+    """pbrMetallicRoughness textures (an embedded PNG in a bufferView), the sampler's wrap
+    modes, KHR_texture_transform (in Blender's UV convention), the factors that multiply
+    the textures, the metallicRoughness channels (G roughness, B metallic), the emissive
+    and normal textures (external URI, normal scale)."""
+    import OpenImageIO as oiio
+
+    png = tmp_path / "e.png"
+    out = oiio.ImageOutput.create(str(png))
+    out.open(str(png), oiio.ImageSpec(2, 2, 3, "uint8"))
+    out.write_image(np.zeros((2, 2, 3), np.uint8))
+    out.close()
+    b = GlbBuilder()
+    pos = b.add(QUAD_POS, g.FLOAT, g.VEC3)
+    idx = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
+    png_bytes = png.read_bytes()
+    while len(b.blob) % 4:
+        b.blob += b"\0"
+    b.views.append(g.BufferView(buffer=0, byteOffset=len(b.blob), byteLength=len(png_bytes)))
+    b.blob += png_bytes
+    view = len(b.views) - 1
+    transform = {"KHR_texture_transform": {"offset": [0.25, 0.5], "rotation": 0.0,
+                                           "scale": [2.0, 3.0]}}
+    mat = g.Material(
+        pbrMetallicRoughness=g.PbrMetallicRoughness(
+            baseColorFactor=[0.5, 0.25, 1.0, 1.0], metallicFactor=0.4, roughnessFactor=0.8,
+            baseColorTexture=g.TextureInfo(index=0, extensions=transform),
+            metallicRoughnessTexture=g.TextureInfo(index=0)),
+        emissiveFactor=[1.0, 0.5, 0.25], emissiveTexture=g.TextureInfo(index=1),
+        normalTexture=g.NormalMaterialTexture(index=1, scale=0.5))
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
+                 meshes=[g.Mesh(primitives=[g.Primitive(attributes=g.Attributes(POSITION=pos),
+                                                        indices=idx, material=0)])],
+                 materials=[mat], samplers=[g.Sampler(wrapS=33648, wrapT=33071)],
+                 textures=[g.Texture(source=0, sampler=0), g.Texture(source=1)],
+                 images=[g.Image(bufferView=view, mimeType="image/png"), g.Image(uri="e.png")],
+                 extensionsUsed=["KHR_texture_transform"])
+    m = gltf.load_gltf_scene(b.finish(gl, tmp_path / "m.glb")).materials[0]
+    base = m.base_color_texture
+    assert base.file.read_bytes() == png_bytes and base.file.parent != tmp_path
+    assert base.wrap == ("mirror", "clamp") and base.factor == (0.5, 0.25, 1.0, 1.0)
+    # glTF: (u', v') = (2u + 0.25, 3v + 0.5); Blender's v = 1 - v_glTF on both sides:
+    # v'_B = 1 - (3 (1 - v_B) + 0.5) = 3 v_B - 2.5
+    np.testing.assert_allclose(base.uv, (2.0, 0.0, 0.25, 0.0, 3.0, -2.5), atol=1e-12)
+    assert m.roughness_texture.channel == 1 and m.roughness_texture.factor == (0.8,) * 4
+    assert m.metallic_texture.channel == 2 and m.metallic_texture.factor == (0.4,) * 4
+    assert m.emission_texture.file == tmp_path / "e.png"
+    assert m.emission_texture.factor == (1.0, 0.5, 0.25, 1.0) and m.emission_strength == 1.0
+    assert m.normal_texture.wrap == ("repeat", "repeat") and m.normal_scale == 0.5

@@ -365,3 +365,78 @@ def test_scene_from_parts_does_what_build_scene_does(caplog) -> None:
         scene.scene_from_parts(tris[1:2], None, 0, mats, [], (0, 0, 0), file="x.blend")
     with pytest.raises(ValueError, match="do not index 2 materials"):
         scene.scene_from_parts(tris, None, 2, mats, [], (0, 0, 0))
+
+
+# ------------------------------------------------------------ texture coordinates
+
+
+def test_quad_and_box_uvs_map_corners_to_the_unit_square(tmp_path: Path) -> None:
+    """A quad's corners in order to (0,0), (1,0), (1,1), (0,1); every box face likewise,
+    counter-clockwise seen from outside (u × v along the outward normal: not mirrored)."""
+    s = build(tmp_path, '[[objects]]\nshape = "quad"\ncorners = [[0, 0, 0], [2, 0, 0], '
+                        '[2, 3, 0], [0, 3, 0]]\nmaterial = "m"\n')
+    assert s.uvs.shape == (2, 3, 2) and s.uvs.dtype == np.float32
+    # on this quad u = x / 2, v = y / 3 at every corner of both triangles
+    np.testing.assert_allclose(s.uvs[..., 0], s.triangles[..., 0] / 2)
+    np.testing.assert_allclose(s.uvs[..., 1], s.triangles[..., 1] / 3)
+    tris = shapes.box(np.zeros(3), np.array([1.0, 2.0, 3.0]), 30.0)
+    uv = shapes.box_uvs()
+    n = shapes.face_normals(tris)
+    for t, w, nn in zip(tris, uv, n, strict=True):
+        # the world-space directions of +u and +v on the face: u × v is the outward normal
+        m = np.column_stack([w[1] - w[0], w[2] - w[0]])
+        e = np.column_stack([t[1] - t[0], t[2] - t[0]])
+        duv = e @ np.linalg.inv(m)  # (3, 2): columns dP/du, dP/dv
+        assert np.cross(duv[:, 0], duv[:, 1]) @ nn > 0
+    assert {tuple(x) for x in uv.reshape(-1, 2)} == {(0, 0), (1, 0), (1, 1), (0, 1)}
+
+
+def test_sphere_uvs_azimuth_and_polar_angle() -> None:
+    """u = azimuth/2π about +Z from +X towards +Y, v = 1 - polar/π, per vertex; no
+    triangle spans more than a small part of u (the seam is unwrapped)."""
+    tris, normals = shapes.sphere(np.array([1.0, 2.0, 3.0]), 2.0, 3)
+    uv = shapes.sphere_uvs(normals)
+    x, y, z = normals[..., 0], normals[..., 1], normals[..., 2]
+    away = x * x + y * y > 1e-12
+    az = np.arctan2(y, x) / (2 * np.pi)
+    d = np.mod(uv[..., 0] - az + 0.5, 1.0) - 0.5  # equal modulo 1
+    assert np.abs(d[away]).max() < 1e-9
+    np.testing.assert_allclose(uv[..., 1], 1 - np.arccos(z) / np.pi, atol=1e-12)
+    span = uv[..., 0].max(axis=1) - uv[..., 0].min(axis=1)
+    assert span.max() < 0.2
+
+
+def test_mesh_uvs_from_obj_and_none_is_zero(tmp_path: Path) -> None:
+    (tmp_path / "t.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.25 0.5\nvt 0.75 0.5\n"
+                                    "vt 0.25 1.0\nf 1/1 2/2 3/3\n")
+    s = build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "t.obj"\nmaterial = "m"\n')
+    np.testing.assert_allclose(s.uvs[0], [[0.25, 0.5], [0.75, 0.5], [0.25, 1.0]])
+    (tmp_path / "m.obj").write_text(OBJ)
+    s = build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "m.obj"\nmaterial = "m"\n')
+    assert s.uvs.shape == (3, 3, 2) and not s.uvs.any()
+
+
+def test_nan_uvs_are_a_user_error(tmp_path: Path) -> None:
+    (tmp_path / "t.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt nan 0.5\nvt 0.75 0.5\n"
+                                    "vt 0.25 1.0\nf 1/1 2/2 3/3\n")
+    with pytest.raises(UserError, match="not finite") as e:
+        build(tmp_path, '[[objects]]\nshape = "mesh"\nfile = "t.obj"\nmaterial = "m"\n')
+    assert e.value.key == "objects[0].file"
+
+
+def test_textured_mesh_without_uvs_warns_once(tmp_path: Path, caplog) -> None:
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(str(tmp_path / "t.png"))
+    out.open(str(tmp_path / "t.png"), oiio.ImageSpec(2, 2, 3, "uint8"))
+    out.write_image(np.zeros((2, 2, 3), np.uint8))
+    out.close()
+    (tmp_path / "m.obj").write_text(OBJ)
+    (tmp_path / "job.toml").write_text(
+        '[[materials]]\nname = "t"\nbase_color_texture = "t.png"\n'
+        + '[[objects]]\nshape = "mesh"\nfile = "m.obj"\nmaterial = "t"\n' * 2)
+    with caplog.at_level(logging.WARNING, logger="relray"):
+        scene.build_scene(job.load_job(tmp_path / "job.toml"))
+    warnings = [r.getMessage() for r in caplog.records if "no texture coordinates" in
+                r.getMessage()]
+    assert len(warnings) == 1 and "objects[0]" in warnings[0]

@@ -44,7 +44,8 @@ from ..scene import gltf
 from ..scene.description import Job
 
 IGNORED = {("Job", "path"), ("RenderSettings", "threads"), ("OutputSettings", "dir"),
-           ("OutputSettings", "name"), ("Job", "motion")}
+           ("OutputSettings", "name"), ("Job", "motion"), ("TextureSpec", "job_file"),
+           ("TextureSpec", "key")}
 """(class, field) pairs left out of :func:`job_digest`: they do not change a frame's
 pixels (``Job.motion``: only through the frame's event, in :func:`frame_digest`)."""
 OMITTED_IF_NONE = {("ShutterEvent", "rotation"), ("SceneSpec", "stars"),
@@ -92,8 +93,8 @@ def canonical(value: Any) -> Any:
 def input_files(job: Job) -> list[Path]:
     """Every file whose content :func:`job_digest` covers, in the order it hashes them:
     each path in the job (``scene.file``, mesh ``file`` parameters, ``scene.includes``,
-    nested includes flattened by the parser) and, after a glTF, its external buffers
-    (:func:`..scene.gltf.external_files`; images are not read: textures are ignored)."""
+    nested includes flattened by the parser, a material's texture images) and, after a
+    glTF, its external buffers and images (:func:`..scene.gltf.external_files`)."""
     found: list[Path] = []
 
     def walk(value: Any) -> None:

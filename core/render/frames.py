@@ -47,6 +47,13 @@ from .materials import SpectralTables, build_tables
 from .rest_frames import GroupAccel, MovingScene
 from .sampling import path_keys, progressive_offsets
 from .starfield import occlusion_test, star_splats
+from .textures import (
+    TextureTable,
+    build_textures,
+    coefficient_table,
+    lab_spread,
+    pixel_spread,
+)
 
 WAVEFRONT = 1 << 16
 #: The per-chunk arrays of :meth:`FrameRenderer._trace_chunk` (see wavefront_buffers).
@@ -117,6 +124,7 @@ def prepare(scene: Scene, mode: str) -> PreparedScene:
     radius = _bounding_radius(scene.lab_triangles()[:n_static] if n_static
                               else scene.lab_triangles(), origin)
     tables = build_tables(list(scene.materials), mode)
+    textures = scene_textures(scene, tables, mode)
     env_image = scene.environment
     env_row = (tables.add_emission_row(environment.base_row(mode)) if env_image is not None
                else -1)
@@ -136,8 +144,26 @@ def prepare(scene: Scene, mode: str) -> PreparedScene:
     area_tris = np.arange(n_geometry, n_static, dtype=np.int32)[emits]
     kscene = kernel_scene(extent, scene.normals, scene.material_ids, tables, lights, geom,
                           segments, area_tris,
-                          environment.kernel_environment(env_image, mode, env_row))
+                          environment.kernel_environment(env_image, mode, env_row), textures)
     return PreparedScene(scene, accel, tables, lights, kscene, radius, mode, tracer, origin)
+
+
+def scene_textures(scene: Scene, tables: SpectralTables, mode: str) -> TextureTable | None:
+    """The scene's :class:`.textures.TextureTable`, None when no material has a texture.
+    Emission textures add the D65_ext row to ``tables.emit`` (spectral modes), colour
+    textures read the RGB→spectrum table (:func:`..physics.rgb_table.coefficient_table`)."""
+    materials = list(scene.materials)
+    if not any(m.textured() for m in materials):
+        return None
+    d65_row = -1
+    if mode != "rgb" and any(m.emission_texture is not None for m in materials):
+        d65_row = tables.add_emission_row(spectrum.d65_ext())
+    coef = None
+    if mode == "cie1931" and any(m.base_color_texture is not None
+                                 or m.emission_texture is not None for m in materials):
+        table = coefficient_table()
+        coef = (table.scale, table.data)
+    return build_textures(materials, scene.uvs, len(scene.triangles), mode, d65_row, coef)
 
 
 ADAPTIVE_FIRST_PASS = 64
@@ -340,10 +366,13 @@ class FrameRenderer:
             lam, pdf, lamu, w_d, d_min, d_max = self.sampler.lanes(
                 u, D, doppler=self.doppler, searchlight=self.searchlight, out=lanes)
             nlanes = 4
+        spread = 0.0
+        if self.kernel.tex.enabled:  # the ray cones' start (textures.py)
+            spread = lab_spread(pixel_spread(camera.tan_half_fov, camera.height), D)
         L, t_hit, seg, feats = trace(self.kernel, prep.tracer, s.max_depth, keys, o_local,
                                      d_lab, lamu, nlanes, sky_seen=not s.transparent,
                                      buffers=keep.setdefault("trace", {}), t0=float(event.t),
-                                     features=self.features)
+                                     features=self.features, spread=spread)
         alpha = np.less(t_hit, MISS_DISTANCE, out=b["alpha"])  # 1.0 where it hit
         sensor, lam_weight = b["sensor"], b["lam_weight"]
         sensor_values(L, lam, pdf, w_d, self.response, self.rgb_mode, sensor, lam_weight,

@@ -66,9 +66,10 @@ def emission_rgb(m: MaterialSpec) -> np.ndarray:
 
 
 def emission_spectrum(m: MaterialSpec, mode: str) -> np.ndarray | None:
-    """The emitted radiance row of a material, or None if it does not emit."""
+    """The emitted radiance row of a material, or None if it does not emit (or emits
+    through an emission texture: the kernel looks that up per texel, :mod:`.textures`)."""
     s = float(m.emission_strength)
-    if s == 0.0:
+    if s == 0.0 or m.emission_texture is not None:
         return None
     if mode == "rgb":
         rgb = emission_rgb(m)

@@ -144,6 +144,39 @@ class MotionSettings:
     render_frames: tuple[int, int] | None = None  # --frames: a sub-range to render
 
 
+#: Wrap modes of a texture along u and along v (glTF's sampler modes: 10497 REPEAT,
+#: 33071 CLAMP_TO_EDGE, 33648 MIRRORED_REPEAT).
+WRAP_MODES = ("repeat", "clamp", "mirror")
+#: The image suffixes a texture file may have (read through OpenImageIO).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr", ".hdr", ".tif", ".tiff", ".tga", ".bmp")
+#: The identity UV transform (a, b, c, d, e, f): u' = a u + b v + c, v' = d u + e v + f.
+IDENTITY_UV = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+
+
+@dataclass(frozen=True)
+class TextureSpec:
+    """One image texture of a material (job-format.md, "Textures").
+
+    ``file``: the image (absolute); ``wrap``: the modes along u and v (:data:`WRAP_MODES`);
+    ``uv``: the affine map from the triangle's UVs to the image's (Blender's convention,
+    (0, 0) the image's bottom-left): ``uv_scale`` of a job material, glTF's
+    KHR_texture_transform converted to that convention; ``factor``: multiplies the
+    texel (r, g, b, a): 1 for a job's texture (which *replaces* the constant), glTF's
+    factors (baseColorFactor, ...), which multiply it; ``channel``: for a scalar map
+    (roughness, metallic) the channel read (0 = the first; glTF's metallicRoughness
+    texture: 1 = G roughness, 2 = B metallic). ``key`` and ``job_file`` name the texture
+    in errors (an unreadable image is found when the renderer reads it).
+    """
+
+    file: Path
+    wrap: tuple[str, str] = ("repeat", "repeat")
+    uv: tuple[float, float, float, float, float, float] = IDENTITY_UV
+    factor: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    channel: int = 0
+    key: str = ""
+    job_file: Path | None = None
+
+
 @dataclass(frozen=True)
 class MaterialSpec:
     """One ``[[materials]]`` entry (Principled-BSDF-like, colours linear Rec.709).
@@ -166,6 +199,12 @@ class MaterialSpec:
     ``reflectance_ir``        float in [0, 1]            --       reflectance above the visible
     ``one_sided_emission``    bool                       false    emit only on the front face,
                                                                   normal (v1-v0)×(v2-v0)
+    ``base_color_texture``    :class:`TextureSpec`       --       replaces ``base_color``
+    ``roughness_texture``     :class:`TextureSpec`       --       replaces ``roughness``
+    ``metallic_texture``      :class:`TextureSpec`       --       replaces ``metallic``
+    ``emission_texture``      :class:`TextureSpec`       --       replaces ``emission``
+    ``normal_texture``        :class:`TextureSpec`       --       tangent-space normal map
+    ``normal_scale``          float                      1.0      glTF normalTexture.scale
     ========================  =========================  =======  ===============================
 
     At most one of ``emission_blackbody``, ``emission_line`` and ``emission_spectrum``.
@@ -185,6 +224,28 @@ class MaterialSpec:
     reflectance_uv: float | None = None
     reflectance_ir: float | None = None
     one_sided_emission: bool = False
+    base_color_texture: TextureSpec | None = None
+    roughness_texture: TextureSpec | None = None
+    metallic_texture: TextureSpec | None = None
+    emission_texture: TextureSpec | None = None
+    normal_texture: TextureSpec | None = None
+    normal_scale: float = 1.0
+
+    def textures(self) -> tuple[TextureSpec | None, ...]:
+        """The texture slots in the kernel's order (:data:`TEXTURE_SLOTS`)."""
+        return tuple(getattr(self, f"{slot}_texture") for slot in TEXTURE_SLOTS)
+
+    def textured(self) -> bool:
+        """Whether any texture slot is set."""
+        return any(t is not None for t in self.textures())
+
+
+#: A material's texture slots, in the order of the kernel's per-material table.
+TEXTURE_SLOTS = ("base_color", "roughness", "metallic", "emission", "normal")
+#: How each slot's image is decoded (scene.images): colour is sRGB in 8/16-bit files
+#: (linear in EXR/HDR), the maps are linear data.
+TEXTURE_ENCODING = {"base_color": "auto", "roughness": "linear", "metallic": "linear",
+                    "emission": "auto", "normal": "linear"}
 
 
 @dataclass(frozen=True, eq=False)

@@ -75,8 +75,16 @@ import numpy as np
 from numba import njit
 
 from ..errors import UserError
-from . import gltf, shapes, worldlines
-from .description import CameraSettings, Job, LightSpec, MaterialSpec, ObjectSpec
+from . import gltf, images, shapes, worldlines
+from .description import (
+    TEXTURE_ENCODING,
+    TEXTURE_SLOTS,
+    CameraSettings,
+    Job,
+    LightSpec,
+    MaterialSpec,
+    ObjectSpec,
+)
 from .footprint import check_memory
 from .sky import EnvironmentImage, load_environment
 from .stars import StarField, star_field
@@ -118,6 +126,10 @@ class Scene:
     stars: StarField | None = None
     # the environment map (scene.environment, read by sky.load_environment), or None
     environment: EnvironmentImage | None = None
+    # float32 (T, 3, 2): the texture coordinates of each triangle's corners (job-format.md
+    # "Textures": (0, 0) the image's bottom-left); zeros where a mesh has none. None only
+    # from callers that bring no UVs (then every triangle has zeros)
+    uvs: np.ndarray | None = None
 
     @property
     def n_static(self) -> int:
@@ -156,6 +168,7 @@ class _Part:
     normals: np.ndarray | None  # float64 (F, 3, 3)
     material_id: np.ndarray | int
     group: int = 0  # velocity group (scene.worldlines), 0 static
+    uvs: np.ndarray | None = None  # float64 (F, 3, 2), None: zeros
 
 
 def _repeat_face_normals(triangles: np.ndarray) -> np.ndarray:
@@ -163,8 +176,9 @@ def _repeat_face_normals(triangles: np.ndarray) -> np.ndarray:
 
 
 def _transform_mesh(
-    triangles: np.ndarray, normals: np.ndarray | None, params: dict
-) -> tuple[np.ndarray, np.ndarray | None]:
+    triangles: np.ndarray, normals: np.ndarray | None, params: dict,
+    uvs: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
     """v -> Rz · (scale ⊙ (axes-converted v)) + translate; normals by the inverse transpose."""
     linear = shapes.rotation_z(params["rotation_z"]) @ np.diag(params["scale"])
     if params["up"] == "y" and params["file"].suffix.lower() not in (".glb", ".gltf"):
@@ -173,20 +187,26 @@ def _transform_mesh(
     if np.linalg.det(linear) < 0:  # never for scale > 0, kept for safety
         tris = tris[:, [0, 2, 1]]
         normals = normals[:, [0, 2, 1]] if normals is not None else None
+        uvs = uvs[:, [0, 2, 1]] if uvs is not None else None
     if normals is not None:
         normals = normals @ np.linalg.inv(linear)  # (M^-T n) for row vectors
-    return tris, normals
+    return tris, normals, uvs
 
 
-def _read_mesh_file(params: dict, key: str, job_file: Path) -> tuple[np.ndarray, np.ndarray | None]:
+Mesh = tuple[np.ndarray, np.ndarray | None, np.ndarray | None]
+
+
+def _read_mesh_file(params: dict, key: str, job_file: Path) -> Mesh:
+    """Triangles, shading normals or None, UVs (F, 3, 2) or None of a mesh file."""
     path: Path = params["file"]
     if path.suffix.lower() in (".glb", ".gltf"):
-        triangles, normals, *_ = gltf.load_gltf(path, key=key, job_file=job_file)
+        gl = gltf.load_gltf_scene(path, key=key, job_file=job_file)
+        triangles, normals = gl.triangles, gl.normals
         if params["up"] == "z":  # the file is Z-up after all: undo the reader's conversion
             back = gltf.Y_UP_TO_Z_UP.T
             triangles = triangles @ back.T
             normals = normals @ back.T if normals is not None else None
-        return triangles, normals
+        return triangles, normals, gl.uvs
     import trimesh  # slow to import: only when a job has a mesh
 
     try:
@@ -194,6 +214,8 @@ def _read_mesh_file(params: dict, key: str, job_file: Path) -> tuple[np.ndarray,
         faces = np.asarray(mesh.faces, dtype=np.int64)
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
         vertex_normals = np.asarray(mesh.vertex_normals) if params["smooth"] else None
+        visual_uv = getattr(getattr(mesh, "visual", None), "uv", None)
+        uv = None if visual_uv is None else np.asarray(visual_uv, dtype=np.float64)
     except Exception as e:  # trimesh raises many kinds of error for a bad file
         raise UserError(f"cannot read mesh file {path}: {type(e).__name__}: {e}", key=key,
                         file=job_file) from None
@@ -205,32 +227,52 @@ def _read_mesh_file(params: dict, key: str, job_file: Path) -> tuple[np.ndarray,
     problem = shapes.coordinate_problem(vertices[faces])
     if problem is not None:
         raise UserError(f"mesh file {path}: {problem}", key=key, file=job_file)
-    return vertices[faces], vertex_normals[faces] if vertex_normals is not None else None
+    uvs = None
+    if uv is not None and uv.ndim == 2 and uv.shape[1] >= 2 and len(uv) == len(vertices):
+        uvs = uv[:, :2][faces]
+        if not np.all(np.isfinite(uvs)):
+            raise UserError(f"mesh file {path}: a texture coordinate (UV) is not finite "
+                            "(NaN or inf)", key=key, file=job_file)
+    return (vertices[faces], vertex_normals[faces] if vertex_normals is not None else None,
+            uvs)
 
 
-def tessellate(obj: ObjectSpec, key: str, job_file: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """Triangles (F, 3, 3) and shading normals (F, 3, 3) or None of one job object.
+def tessellate(obj: ObjectSpec, key: str, job_file: Path) -> Mesh:
+    """Triangles (F, 3, 3), shading normals (F, 3, 3) or None and UVs (F, 3, 2) or None
+    (a mesh file without UVs) of one job object (UVs: :mod:`.shapes`).
 
     ``key`` ("objects[3]") names the object in errors about its mesh file.
     """
     p = obj.params
     if obj.shape == "sphere":
-        return shapes.sphere(p["center"], p["radius"], p["subdivisions"])
+        triangles, normals = shapes.sphere(p["center"], p["radius"], p["subdivisions"])
+        return triangles, normals, shapes.sphere_uvs(normals)
     if obj.shape == "box":
-        return shapes.box(p["center"], p["size"], p["rotation_z"]), None
+        return shapes.box(p["center"], p["size"], p["rotation_z"]), None, shapes.box_uvs()
     if obj.shape == "quad":
-        return shapes.quad(p["corners"]), None
+        return shapes.quad(p["corners"]), None, shapes.quad_uvs()
     if obj.shape == "mesh":
-        triangles, normals = _read_mesh_file(p, f"{key}.file", job_file)
+        triangles, normals, uvs = _read_mesh_file(p, f"{key}.file", job_file)
         if len(triangles) == 0:
             raise UserError(f"mesh file {p['file']} has no triangles", key=f"{key}.file",
                             file=job_file)
-        triangles, normals = _transform_mesh(triangles, normals, p)
+        triangles, normals, uvs = _transform_mesh(triangles, normals, p, uvs)
         problem = shapes.coordinate_problem(triangles)
         if problem is not None:
             raise UserError(f"after its transform, {problem}", key=key, file=job_file)
-        return triangles, normals
+        return triangles, normals, uvs
     raise ValueError(f"unknown shape {obj.shape!r}")  # job.py has validated the shape
+
+
+def check_textures(materials: Sequence[MaterialSpec]) -> None:
+    """Read every texture image of ``materials`` now (a missing, unreadable, empty, too
+    large or non-finite image is a UserError naming its key and file before anything is
+    rendered or written); :func:`.images.read_image` memoises them for the renderer."""
+    for m in materials:
+        for slot, tex in zip(TEXTURE_SLOTS, m.textures(), strict=True):
+            if tex is not None:
+                images.read_image(tex.file, key=tex.key or "scene.file", file=tex.job_file,
+                                  encoding=TEXTURE_ENCODING[slot])
 
 
 def area_light_material(light: LightSpec, index: int) -> MaterialSpec:
@@ -303,6 +345,7 @@ def build_scene(job: Job) -> Scene:
     camera = None
     named: list[tuple[str, int]] = []
     lighten: dict[str, str] = {}
+    warned_uv = False
     gl = None
     if job.scene.file is not None:
         gl = gltf.load_gltf_scene(job.scene.file, key="scene.file", job_file=job.path)
@@ -321,18 +364,23 @@ def build_scene(job: Job) -> Scene:
         parts += _gltf_parts(gl, group_of[:len(node_specs)], offsets[:len(node_specs)])
         named.append(("scene.file", len(gl.triangles)))
     for i, obj in enumerate(job.scene.objects):
-        tris, norms = tessellate(obj, f"objects[{i}]", job.path)
+        tris, norms, uvs = tessellate(obj, f"objects[{i}]", job.path)
         g = group_of[len(node_specs) + i]
         if g:
             tris = tris + offsets[len(node_specs) + i]
-        parts.append(_Part(tris, norms, ids[obj.material], g))
+        parts.append(_Part(tris, norms, ids[obj.material], g, uvs))
+        if uvs is None and materials[ids[obj.material]].textured() and not warned_uv:
+            warned_uv = True
+            log.warning("objects[%d]: the mesh file has no texture coordinates (UVs): its "
+                        "textured material shows the texel at (0, 0) everywhere", i)
         named.append((f"objects[{i}]", len(tris)))
         if obj.shape == "mesh":
             lighten[f"objects[{i}]"] = f"objects[{i}].file"
+    check_textures(materials)
     # before the accelerator: names what to lighten (a mesh's file, else the object)
     check_memory(job.render, job.output, [(lighten.get(key, key), n) for key, n in named],
                  job.path)
-    triangles, normals, material_ids = _concatenate(parts)
+    triangles, normals, material_ids, uvs = _concatenate(parts)
     tri_group = None
     if groups:
         tri_group = np.concatenate([np.full(len(p.triangles), p.group, np.int32)
@@ -340,7 +388,7 @@ def build_scene(job: Job) -> Scene:
     scene = scene_from_parts(triangles, normals, material_ids, materials,
                              [*lights, *job.scene.lights], job.scene.background, camera,
                              file=job.path, named_parts=named, tri_group=tri_group,
-                             groups=tuple(groups),
+                             groups=tuple(groups), uvs=uvs,
                              environment=load_environment(job.scene.environment, job.path))
     if job.scene.stars is not None:
         scene.stars = star_field(job.scene.stars)
@@ -352,13 +400,14 @@ def _gltf_parts(gl: gltf.GltfScene, group_of: Sequence[int],
     """The glTF file's triangles as parts: the static ones, then each moving node's in
     its group's rest-frame coordinates (the node order is kept within each part)."""
     if not gl.motions:
-        return [_Part(gl.triangles, gl.normals, gl.material_ids)]
+        return [_Part(gl.triangles, gl.normals, gl.material_ids, 0, gl.uvs)]
     parts = []
     for k in range(-1, len(gl.motions)):
         rows = np.flatnonzero(gl.tri_motion == k)
         tris = gl.triangles[rows] + (offsets[k] if k >= 0 else 0.0)
         norms = None if gl.normals is None else gl.normals[rows]
-        parts.append(_Part(tris, norms, gl.material_ids[rows], group_of[k] if k >= 0 else 0))
+        parts.append(_Part(tris, norms, gl.material_ids[rows], group_of[k] if k >= 0 else 0,
+                           None if gl.uvs is None else gl.uvs[rows]))
     return parts
 
 
@@ -369,6 +418,7 @@ def scene_from_parts(
     file: str | Path | None = None, named_parts: Sequence[tuple[str, int]] = (),
     tri_group: np.ndarray | None = None, groups: tuple[VelocityGroup, ...] = (),
     environment: EnvironmentImage | None = None,
+    uvs: np.ndarray | None = None,
 ) -> Scene:
     """A :class:`Scene` from triangle arrays and specs: what :func:`build_scene` does to
     a job's geometry once it is read (for callers with their own geometry: the add-on).
@@ -385,15 +435,21 @@ def scene_from_parts(
     ((key, triangle count) of the leading triangles in order, e.g. ("objects[2]", 320))
     that lost every triangle: geometry that vanished is an error, never a black frame.
     ``tri_group`` (T,) and ``groups``: moving objects (:class:`Scene`); the triangles are
-    then ordered by group (stably: the static ones keep their order).
+    then ordered by group (stably: the static ones keep their order). ``uvs`` (T, 3, 2)
+    texture coordinates, or None (zeros); they must be finite (a ValueError: the job's
+    readers check theirs with the file's key).
     """
     tris = np.asarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
     ids = np.broadcast_to(np.asarray(material_ids, dtype=np.int32), (len(tris),))
     if len(ids) and (ids.min() < 0 or ids.max() >= len(materials)):
         raise ValueError(f"material ids {ids.min()}..{ids.max()} do not index "
                          f"{len(materials)} materials")
+    if uvs is not None:
+        uvs = np.asarray(uvs, dtype=np.float64).reshape(-1, 3, 2)
+        if not np.all(np.isfinite(uvs)):
+            raise ValueError("texture coordinates must be finite")
     parts = [_Part(tris, None if normals is None else
-                   np.asarray(normals, dtype=np.float64).reshape(-1, 3, 3), ids)]
+                   np.asarray(normals, dtype=np.float64).reshape(-1, 3, 3), ids, 0, uvs)]
     materials, kept_lights = list(materials), []
     n_given = len(tris)
     for i, light in enumerate(lights):
@@ -404,8 +460,9 @@ def scene_from_parts(
         parts.append(_Part(quad, None, len(materials)))
         materials.append(area_light_material(light, i))
 
-    triangles, normals, material_ids = _concatenate(parts)
+    triangles, normals, material_ids, uvs = _concatenate(parts)
     triangles, normals, material_ids, keep = _drop_degenerate(triangles, normals, material_ids)
+    uvs = uvs[keep]
     # the quads (static) follow the given triangles: after the stable sort by group they
     # are still the last static ones
     light_triangles = int(np.count_nonzero(keep[n_given:]))
@@ -415,6 +472,7 @@ def scene_from_parts(
         order = np.argsort(tri_group, kind="stable")
         triangles, material_ids, tri_group = triangles[order], material_ids[order], \
             tri_group[order]
+        uvs = uvs[order]
         normals = None if normals is None else normals[order]
     dropped = int(len(keep) - keep.sum())
     if len(triangles) == 0:  # one message: the error says why (no warning before it)
@@ -447,6 +505,7 @@ def scene_from_parts(
         groups=tuple(groups),
         light_triangles=light_triangles,
         environment=environment,
+        uvs=np.ascontiguousarray(uvs, dtype=np.float32),
     )
 
 
@@ -472,10 +531,13 @@ def _count_unresolved(triangles: np.ndarray) -> int:
     return int(np.count_nonzero(longest < eps))
 
 
-def _concatenate(parts: list[_Part]) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+def _concatenate(parts: list[_Part]
+                 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+    """Triangles, normals (None when no part has them), material ids, UVs (zeros where
+    a part has none) of the parts in order."""
     parts = [p for p in parts if len(p.triangles)]
     if not parts:
-        return np.zeros((0, 3, 3)), None, np.zeros(0, dtype=np.int32)
+        return np.zeros((0, 3, 3)), None, np.zeros(0, dtype=np.int32), np.zeros((0, 3, 2))
     triangles = np.concatenate([p.triangles for p in parts])
     ids = np.concatenate([np.broadcast_to(np.asarray(p.material_id, dtype=np.int32),
                                           (len(p.triangles),)) for p in parts])
@@ -485,4 +547,6 @@ def _concatenate(parts: list[_Part]) -> tuple[np.ndarray, np.ndarray | None, np.
             p.normals if p.normals is not None else _repeat_face_normals(p.triangles)
             for p in parts
         ])
-    return triangles, normals, ids
+    uvs = np.concatenate([p.uvs if p.uvs is not None else np.zeros((len(p.triangles), 3, 2))
+                          for p in parts])
+    return triangles, normals, ids, uvs

@@ -17,6 +17,8 @@ mesh primitives (TRIANGLES, STRIP, FAN)    triangles, through the node hierarchy
                                            under a mirroring transform
 ``NORMAL``                                 shading normals (inverse-transpose transformed);
                                            face normals where a primitive has none
+``TEXCOORD_0``                             UVs, v -> 1 - v (Blender's bottom-left origin,
+                                           as Blender's importer); 0 where absent
 ``baseColorFactor`` (linear)               ``base_color`` (alpha ignored); default 1 1 1
 ``metallicFactor``, ``roughnessFactor``    ``metallic``, ``roughness``; default 1, 1
 ``emissiveFactor``                         ``emission``
@@ -56,9 +58,11 @@ from __future__ import annotations
 
 import base64
 import binascii
+import hashlib
 import json
 import logging
 import math
+import os
 import struct
 from collections.abc import Iterator
 from pathlib import Path
@@ -67,6 +71,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from .. import user_cache_dir
 from ..errors import UserError
 from ..files import MAX_BINARY_BYTES, read_input
 from .description import (
@@ -74,6 +79,7 @@ from .description import (
     CameraSettings,
     LightSpec,
     MaterialSpec,
+    TextureSpec,
     Worldline,
     frozen,
 )
@@ -130,6 +136,7 @@ class GltfScene(NamedTuple):
     camera: CameraSettings | None
     tri_motion: np.ndarray
     motions: list[NodeMotion]
+    uvs: np.ndarray | None = None  # float64 (T, 3, 2): TEXCOORD_0 with v -> 1 - v, else 0
 
 
 class _CorruptError(Exception):
@@ -440,8 +447,10 @@ def _triangulate(indices: np.ndarray, mode: int) -> np.ndarray | None:
 def _primitive_triangles(
     doc: dict[str, Any], buffers: list[bytes], prim: dict[str, Any], world: np.ndarray,
     where: str,
-) -> tuple[np.ndarray, np.ndarray | None] | None:
-    """World triangles (F, 3, 3) and normals (F, 3, 3) or None of one primitive."""
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None] | None:
+    """World triangles (F, 3, 3), normals (F, 3, 3) or None and UVs (F, 3, 2) or None
+    (TEXCOORD_0 with glTF's top-left origin turned into Blender's bottom-left one,
+    v -> 1 - v, as Blender's importer does) of one primitive."""
     for ext in prim.get("extensions", {}):
         if ext in _UNSUPPORTED_EXTENSIONS:
             raise _CorruptError(f"{where} uses {ext}, which relray cannot read")
@@ -478,7 +487,17 @@ def _primitive_triangles(
         length = np.linalg.norm(n, axis=1, keepdims=True)
         n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
         normals = n[faces]
-    return triangles, normals
+    uvs = None
+    if "TEXCOORD_0" in attributes:
+        uv = _read_accessor(doc, buffers, attributes["TEXCOORD_0"]).astype(np.float64)
+        if uv.ndim != 2 or uv.shape[1] < 2 or len(uv) != len(positions):
+            raise _CorruptError(f"{where}: TEXCOORD_0 must be 2-vectors, one per POSITION")
+        uv = uv[:, :2].copy()
+        if not np.all(np.isfinite(uv)):
+            raise _CorruptError(f"{where}: TEXCOORD_0 is not finite (NaN or inf)")
+        uv[:, 1] = 1.0 - uv[:, 1]
+        uvs = uv[faces]
+    return triangles, normals, uvs
 
 
 def _face_normals_repeated(triangles: np.ndarray) -> np.ndarray:
@@ -501,7 +520,108 @@ def _factor(
     return v
 
 
-def _material(doc_mat: dict[str, Any], index: int) -> MaterialSpec:
+#: glTF sampler wrap modes -> relray's (description.WRAP_MODES); absent: REPEAT.
+_WRAP = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
+#: Image MIME types of embedded images -> the file suffix they are cached under.
+_MIME_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg"}
+#: Blender's UV convention from glTF's: (u, v) -> (u, 1 - v) (its own inverse).
+_FLIP_V = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 1.0], [0.0, 0.0, 1.0]])
+
+
+class _Textures:
+    """Turns a material's textureInfo into a :class:`TextureSpec` (images by URI, from a
+    bufferView or a data: URI; the sampler's wrap modes; KHR_texture_transform)."""
+
+    def __init__(self, doc: dict[str, Any], buffers: list[bytes], path: Path, key: str,
+                 job_file: str | Path | None) -> None:
+        self.doc, self.buffers, self.path, self.key = doc, buffers, path, key
+        self.job_file = None if job_file is None else Path(job_file)
+        self.files: dict[int, Path] = {}
+
+    def spec(self, info: Any, where: str, factor: tuple[float, ...] = (1.0,) * 4,
+             channel: int = 0) -> TextureSpec | None:
+        if info is None:
+            return None
+        if not isinstance(info, dict):
+            raise _CorruptError(f"{where} must be an object")
+        tex = _item(self.doc, "textures", info.get("index"), f"{where}.index")
+        if "source" not in tex:
+            log.warning("glTF %s: the texture has no image; ignored", where)
+            return None
+        src = _index(tex["source"], len(_array(self.doc, "images")), f"{where} source")
+        wrap = ("repeat", "repeat")
+        if "sampler" in tex:
+            smp = _item(self.doc, "samplers", tex["sampler"], f"{where} sampler")
+            wrap = (_choice(smp.get("wrapS", 10497), _WRAP, f"{where} sampler wrapS"),
+                    _choice(smp.get("wrapT", 10497), _WRAP, f"{where} sampler wrapT"))
+        uv_map = _texture_transform(info, where)
+        if info.get("texCoord", 0) != 0:
+            log.warning("glTF %s: only TEXCOORD_0 is read; texCoord %s uses it", where,
+                        info.get("texCoord"))
+        return TextureSpec(file=self.image_file(src), wrap=wrap, uv=uv_map,
+                           factor=tuple(float(x) for x in factor), channel=channel,
+                           key=self.key, job_file=self.job_file)
+
+    def image_file(self, i: int) -> Path:
+        """The file of images[i]: its URI beside the glTF file, or its bytes (bufferView
+        or data: URI) written once to the user's cache, named by their SHA-256."""
+        if i in self.files:
+            return self.files[i]
+        img = _item(self.doc, "images", i, f"images[{i}]")
+        uri = img.get("uri")
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            self.files[i] = self.path.parent / unquote(uri)
+            return self.files[i]
+        if isinstance(uri, str):
+            head, _, payload = uri.partition(",")
+            try:
+                data = base64.b64decode(payload, validate=False)
+            except (binascii.Error, ValueError):
+                raise _CorruptError(f"images[{i}]: bad base64 data URI") from None
+            mime = head[5:].split(";")[0]
+        elif "bufferView" in img:
+            view = _item(self.doc, "bufferViews", img["bufferView"], f"images[{i}].bufferView")
+            data = _read_view(self.doc, self.buffers, img["bufferView"], 0, np.dtype(np.uint8),
+                              _count(view.get("byteLength"), f"images[{i}] byteLength"),
+                              1).tobytes()
+            mime = img.get("mimeType", "")
+        else:
+            raise _CorruptError(f"images[{i}] has neither uri nor bufferView")
+        suffix = _MIME_SUFFIX.get(mime)
+        if suffix is None:
+            raise _CorruptError(f"images[{i}]: mimeType {mime!r} is not image/png or "
+                                "image/jpeg")
+        folder = Path(user_cache_dir()) / "gltf-images"
+        folder.mkdir(parents=True, exist_ok=True)
+        out = folder / (hashlib.sha256(data).hexdigest() + suffix)
+        if not out.exists():
+            tmp = out.with_suffix(f".{os.getpid()}.tmp")
+            tmp.write_bytes(data)
+            os.replace(tmp, out)
+        self.files[i] = out
+        return out
+
+
+def _texture_transform(info: dict[str, Any], where: str
+                       ) -> tuple[float, float, float, float, float, float]:
+    """KHR_texture_transform (offset, rotation, scale: uv' = T R S uv in glTF's UVs) as
+    the affine map of Blender-convention UVs: F (T R S) F with F(u, v) = (u, 1 - v)."""
+    ext = info.get("extensions", {}).get("KHR_texture_transform")
+    if ext is None:
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    off = _factor(ext.get("offset"), [0.0, 0.0], f"{where} offset", -1e15, 1e15)
+    rot = _factor(ext.get("rotation"), [0.0], f"{where} rotation", -1e15, 1e15)[0]
+    sc = _factor(ext.get("scale"), [1.0, 1.0], f"{where} scale", -1e15, 1e15)
+    c, s_ = math.cos(rot), math.sin(rot)
+    trs = (np.array([[1.0, 0.0, off[0]], [0.0, 1.0, off[1]], [0.0, 0.0, 1.0]])
+           @ np.array([[c, s_, 0.0], [-s_, c, 0.0], [0.0, 0.0, 1.0]])
+           @ np.diag([sc[0], sc[1], 1.0]))
+    a = _FLIP_V @ trs @ _FLIP_V
+    return (a[0, 0], a[0, 1], a[0, 2], a[1, 0], a[1, 1], a[1, 2])
+
+
+def _material(doc_mat: dict[str, Any], index: int,
+              textures: _Textures | None = None) -> MaterialSpec:
     where = f"materials[{index}]"
     pbr = doc_mat.get("pbrMetallicRoughness", {})
     ext = doc_mat.get("extensions", {})
@@ -517,10 +637,30 @@ def _material(doc_mat: dict[str, Any], index: int) -> MaterialSpec:
     if ior < 1.0:  # glTF allows 0 (an "infinite" IOR) and nothing below 1 otherwise
         log.warning("glTF %s: ior %g is not supported, using 1.5", where, ior)
         ior = 1.5
-    if any(k in pbr for k in ("baseColorTexture", "metallicRoughnessTexture")) or any(
-        k in doc_mat for k in ("normalTexture", "emissiveTexture", "occlusionTexture")
-    ):
-        log.warning("glTF %s: textures are ignored (only the factors are used)", where)
+    tex: dict[str, Any] = {}
+    if textures is not None:
+        # the factors multiply the textures (glTF 2.0, 3.9.2): base colour per channel,
+        # metallicRoughness's B (metallic) and G (roughness), emissive per channel
+        tex["base_color_texture"] = textures.spec(pbr.get("baseColorTexture"),
+                                                  f"{where}.baseColorTexture", tuple(base))
+        mr = pbr.get("metallicRoughnessTexture")
+        tex["roughness_texture"] = textures.spec(mr, f"{where}.metallicRoughnessTexture",
+                                                 (roughness,) * 4, channel=1)
+        tex["metallic_texture"] = textures.spec(mr, f"{where}.metallicRoughnessTexture",
+                                                (metallic,) * 4, channel=2)
+        tex["emission_texture"] = textures.spec(doc_mat.get("emissiveTexture"),
+                                                f"{where}.emissiveTexture", (*emissive, 1.0))
+        normal = doc_mat.get("normalTexture")
+        tex["normal_texture"] = textures.spec(normal, f"{where}.normalTexture")
+        if isinstance(normal, dict):
+            tex["normal_scale"] = _factor(normal.get("scale"), [1.0],
+                                          f"{where}.normalTexture.scale", -1e15, 1e15)[0]
+        if doc_mat.get("alphaMode", "OPAQUE") != "OPAQUE":
+            log.warning("glTF %s: alphaMode %s is not supported (the surface is opaque)",
+                        where, doc_mat.get("alphaMode"))
+        if "occlusionTexture" in doc_mat:
+            log.warning("glTF %s: occlusionTexture is ignored (a path tracer computes "
+                        "occlusion)", where)
     return MaterialSpec(
         name=str(doc_mat.get("name") or f"gltf_material_{index}"),
         base_color=(base[0], base[1], base[2]),
@@ -530,6 +670,7 @@ def _material(doc_mat: dict[str, Any], index: int) -> MaterialSpec:
         ior=min(ior, 100.0),
         emission=(emissive[0], emissive[1], emissive[2]),
         emission_strength=strength if any(emissive) else 0.0,
+        **tex,
     )
 
 
@@ -630,12 +771,14 @@ def _guarded(path: Path, key: str, job_file: str | Path | None, func: Any) -> An
 
 
 def external_files(path: str | Path) -> list[Path]:
-    """The files a glTF document reads besides itself (its buffers' file URIs), for the
-    resume digest; [] when the document cannot be read (loading it will say why)."""
+    """The files a glTF document reads besides itself (its buffers' and images' file
+    URIs), for the resume digest; [] when the document cannot be read (loading it will
+    say why)."""
     path = Path(path)
     try:
         doc, _ = _read_document(path, "scene.file", path)
         uris = [b.get("uri") for b in _array(doc, "buffers")]
+        uris += [i.get("uri") for i in _array(doc, "images") if isinstance(i, dict)]
     except (UserError, _CorruptError, KeyError, TypeError, ValueError, RecursionError):
         return []
     return [path.parent / unquote(u) for u in uris
@@ -740,9 +883,11 @@ def _node_worldline(w: Any, where: str) -> Worldline:
 def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
     doc, glb_bin = _read_document(path, key, job_file)
     buffers = _load_buffers(doc, path.parent, glb_bin, key, job_file)
-    materials = [_material(m, i) for i, m in enumerate(doc.get("materials", []))]
+    reader = _Textures(doc, buffers, path, key, job_file)
+    materials = [_material(m, i, reader) for i, m in enumerate(doc.get("materials", []))]
     default_id: int | None = None
-    tris, norms, mids, moving = [], [], [], []
+    tris, norms, mids, moving, uvs = [], [], [], [], []
+    warned_uv = False
     motions: list[NodeMotion] = []
     lights: list[LightSpec] = []
     light_defs = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
@@ -768,6 +913,11 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
                     mid = default_id
                 tris.append(got[0])
                 norms.append(got[1])
+                uvs.append(got[2] if got[2] is not None else np.zeros((len(got[0]), 3, 2)))
+                if got[2] is None and materials[mid].textured() and not warned_uv:
+                    warned_uv = True
+                    log.warning("glTF %s: no TEXCOORD_0 (UVs): its textured material shows "
+                                "the texel at (0, 0) everywhere", where)
                 mids.append(np.full(len(got[0]), mid, dtype=np.int32))
                 moving.append(np.full(len(got[0]), motion_id, dtype=np.int32))
         light_ref = node.get("extensions", {}).get("KHR_lights_punctual")
@@ -784,4 +934,5 @@ def _load(path: Path, key: str, job_file: str | Path | None) -> GltfScene:
     material_ids = np.concatenate(mids) if mids else np.zeros(0, dtype=np.int32)
     tri_motion = np.concatenate(moving) if moving else np.zeros(0, dtype=np.int32)
     return GltfScene(triangles, normals, material_ids, materials, lights, _first_camera(doc),
-                     tri_motion, motions)
+                     tri_motion, motions,
+                     np.concatenate(uvs) if uvs else np.zeros((0, 3, 2)))

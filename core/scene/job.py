@@ -74,6 +74,8 @@ from ..files import MAX_TEXT_BYTES, check_readable, read_input, resolve_path
 from ..physics import relativity
 from . import gltf, schema, shapes, worldlines
 from .description import (
+    IMAGE_SUFFIXES,
+    TEXTURE_SLOTS,
     CameraSettings,
     EnvironmentSpec,
     Job,
@@ -85,6 +87,7 @@ from .description import (
     RenderSettings,
     SceneSpec,
     StarsSettings,
+    TextureSpec,
     ViewTransform,
     Worldline,
     frozen,
@@ -382,7 +385,24 @@ def _check_acceleration(m: MotionSettings, ctx: _Ctx) -> None:
 
 
 
-def _material(m: schema.Material, ctx: _Ctx) -> MaterialSpec:
+def _textures(m: schema.Material, ctx: _Ctx, base: Path | None) -> dict[str, TextureSpec]:
+    """The material's ``*_texture`` keys as :class:`TextureSpec` (files relative to
+    ``base``, the job file's folder; they must exist), with its ``uv_scale``."""
+    out = {}
+    su, sv = m.uv_scale
+    for slot in TEXTURE_SLOTS:
+        name = f"{slot}_texture"
+        if getattr(m, name) is None:
+            continue
+        if base is None:
+            raise ctx.error(name, "a texture file needs the job file's folder")
+        file = _existing_file(getattr(m, name), ctx, name, base, IMAGE_SUFFIXES)
+        out[name] = TextureSpec(file=file, uv=(su, 0.0, 0.0, 0.0, sv, 0.0), key=ctx.key(name),
+                                job_file=ctx.file)
+    return out
+
+
+def _material(m: schema.Material, ctx: _Ctx, base: Path | None = None) -> MaterialSpec:
     spectral_forms = [k for k in ("emission_blackbody", "emission_line", "emission_spectrum")
                       if given(m, k)]
     if len(spectral_forms) > 1:
@@ -411,6 +431,7 @@ def _material(m: schema.Material, ctx: _Ctx) -> MaterialSpec:
         reflectance_uv=m.reflectance_uv,
         reflectance_ir=m.reflectance_ir,
         one_sided_emission=m.one_sided_emission,
+        **_textures(m, ctx, base),
     )
 
 
@@ -538,7 +559,8 @@ def material_from_dict(d: Mapping[str, Any], key_prefix: str = "",
     """
     data = _table_from_python(d, key_prefix, file)
     m = schema.validate(schema.Material, data, file, key_prefix, clamped)
-    return _material(m, _Ctx(_opt_path(file), key_prefix))
+    f = _opt_path(file)
+    return _material(m, _Ctx(f, key_prefix), None if f is None else f.parent)
 
 
 def light_from_dict(d: Mapping[str, Any], key_prefix: str = "",
@@ -603,7 +625,7 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
 
     for i, item in enumerate(spec.materials):
         mctx = ctx.sub(f"materials[{i}]")
-        m = _material(item, mctx)
+        m = _material(item, mctx, job_dir)
         if m.name in origin:
             raise mctx.error("name", f"material '{m.name}' is already defined"
                              + ("" if origin[m.name] == ctx.file

@@ -584,6 +584,18 @@ class Material(Table):
     reflectance_ir: Unit = Field(None, description="Reflectance above the visible band.")
     one_sided_emission: Bool = Field(False, description="Emit only on the front face, normal "
                                                         "(v1-v0)×(v2-v0).")
+    base_color_texture: Str = Field(None, description="Image (relative to the job file) "
+                                    "replacing base_color; PNG/JPEG sRGB, EXR/HDR linear.")
+    roughness_texture: Str = Field(None, description="Image replacing roughness (its first "
+                                                     "channel, linear).")
+    metallic_texture: Str = Field(None, description="Image replacing metallic (its first "
+                                                    "channel, linear).")
+    emission_texture: Str = Field(None, description="Image replacing emission (an RGB "
+                                  "emitter per texel, times emission_strength).")
+    normal_texture: Str = Field(None, description="Tangent-space normal map (linear, "
+                                                  "(0.5, 0.5, 1) is flat).")
+    uv_scale: _vec(2, Positive) = Field([1.0, 1.0], description="Multiplies the UVs "
+                                        "before every texture lookup (repeats the image).")
 
 
 def _strictly_increasing(v: list[float]) -> list[float]:

@@ -254,3 +254,49 @@ def area_light_quad(
     # Counter-clockwise seen from the lit side: normal (c1-c0) x (c2-c0) = -z_local.
     corners = np.stack([p - hx - hy, p - hx + hy, p + hx + hy, p + hx - hy])
     return quad(corners)
+
+
+# ---------------------------------------------------------------- texture coordinates
+#: UVs (job-format.md "Textures"): (0, 0) is an image's bottom-left corner, (1, 1) its
+#: top-right, as in Blender. Every function returns float64 (F, 3, 2), one (u, v) per
+#: triangle corner, in the order of the triangles of the shape's function above.
+
+#: A quad's corners c0..c3 map to (0,0), (1,0), (1,1), (0,1); its triangles are
+#: (c0, c1, c2) and (c0, c2, c3) (:func:`quad`).
+_QUAD_UV = np.array([[(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)],
+                     [(0.0, 0.0), (1.0, 1.0), (0.0, 1.0)]])
+
+
+def quad_uvs() -> np.ndarray:
+    """UVs (2, 3, 2) of :func:`quad`: the corners in order to (0,0), (1,0), (1,1), (0,1)."""
+    return _QUAD_UV.copy()
+
+
+def box_uvs() -> np.ndarray:
+    """UVs (12, 3, 2) of :func:`box`: each face is the unit square. Every face is the
+    pair of triangles (a, b, c), (a, c, d) counter-clockwise seen from outside, mapped as a
+    quad a, b, c, d, so the picture is not mirrored seen from outside."""
+    return np.tile(_QUAD_UV, (6, 1, 1))
+
+
+def sphere_uvs(normals: np.ndarray) -> np.ndarray:
+    """UVs (F, 3, 2) of :func:`sphere` from its radial unit normals (F, 3, 3) (in the
+    sphere's own axes): u = azimuth/2π about +Z from +X towards +Y, in [0, 1), and
+    v = 1 - polar angle/π (v = 1 at the north pole +Z).
+
+    Per triangle: a triangle across the seam (u = 0 = 1) gets its small u raised by 1, so
+    its UVs do not sweep back across the whole texture (the repeat wrap maps u ≥ 1 back);
+    a corner at a pole (azimuth undefined) takes the mean u of the other two."""
+    n = np.asarray(normals, np.float64)
+    x, y, z = n[..., 0], n[..., 1], n[..., 2]
+    u = np.mod(np.arctan2(y, x) / (2.0 * math.pi), 1.0)
+    v = 1.0 - np.arccos(np.clip(z, -1.0, 1.0)) / math.pi
+    pole = x * x + y * y < 1e-20
+    lo = np.where(pole, np.inf, u).min(axis=1, keepdims=True)
+    hi = np.where(pole, -np.inf, u).max(axis=1, keepdims=True)
+    across = (hi - lo) > 0.5
+    u = np.where(across & (u < 0.5), u + 1.0, u)
+    others = np.where(pole, 0.0, u).sum(axis=1, keepdims=True) / np.maximum(
+        (~pole).sum(axis=1, keepdims=True), 1)
+    u = np.where(pole, others, u)
+    return np.stack([u, v], axis=-1)
