@@ -26,6 +26,7 @@ makes ``bpy.ops.render.render`` raise ``RuntimeError`` with the message.
 from __future__ import annotations
 
 import hashlib
+import os
 import threading
 import time
 import weakref
@@ -727,7 +728,7 @@ def scene_hash(scene, mode: str) -> str:
     pivots)."""
     h = hashlib.blake2b(digest_size=16)
     for a in (scene.triangles, scene.normals, scene.material_ids, scene.background,
-              scene.tri_group):
+              scene.tri_group, scene.uvs):
         if a is not None:
             h.update(np.ascontiguousarray(a).tobytes())
     for group in scene.groups:
@@ -741,6 +742,14 @@ def scene_hash(scene, mode: str) -> str:
         for a in (scene.stars.directions, scene.stars.temperature, scene.stars.omega):
             h.update(np.ascontiguousarray(a).tobytes())
     h.update(repr(scene.materials).encode())
+    for m in scene.materials:  # an image saved again under its name renders anew
+        for tex in m.textures():
+            if tex is not None:
+                try:
+                    st = os.stat(tex.file)
+                    h.update(f"{st.st_size}:{st.st_mtime_ns}".encode())
+                except OSError:
+                    h.update(b"missing")
     h.update(str(scene.light_triangles).encode())  # which triangles are area lights
     for light in scene.lights:
         h.update(repr(light).encode())
