@@ -28,6 +28,7 @@ from relray.bench import common as cm
 from relray.bench import (
     convergence,
     embree_floor,
+    environment,
     first_render,
     report,
     skips,
@@ -36,8 +37,8 @@ from relray.bench import (
     velocity_groups,
 )
 
-SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "textures",
-            "first", "convergence")
+SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "environment",
+            "textures", "first", "convergence")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -66,6 +67,11 @@ class Plan:
     moving_size: int = 128
     moving_spp: int = 16
     moving_repeat: int = 5
+    env_size: tuple[int, int] = (96, 64)
+    env_spp: tuple[int, ...] = (4, 8, 16, 32, 64)
+    env_bsdf_spp: tuple[int, ...] = (16, 64, 256, 1024)
+    env_ref_spp: int = 2048
+    env_repeat: int = 2
     tex_size: int = 128
     tex_spp: int = 16
     tex_rounds: int = 3
@@ -83,9 +89,10 @@ FULL = Plan("full")
 QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_repeat=1,
              heavy_size=128, heavy_spp=8, heavy_repeat=1, beta_size=48, beta_spp=8,
              beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
-             moving_size=64, moving_spp=8, moving_repeat=2, tex_size=64, tex_spp=8,
-             tex_rounds=2, first_render=False, anim_frames=8, anim_spp=2, anim_separate=1,
-             wait_idle_s=0.0,
+             moving_size=64, moving_spp=8, moving_repeat=2, env_size=(48, 32),
+             env_spp=(4, 16), env_bsdf_spp=(16, 256), env_ref_spp=512, env_repeat=1,
+             tex_size=64, tex_spp=8, tex_rounds=2, first_render=False,
+             anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
              conv=convergence.ConvergenceConfig(width=64, height=64,
                                                 spp=[4, 8, 16, 32, 64, 128],
                                                 thresholds=[0.1, 0.05], repeats=2,
@@ -94,8 +101,9 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
              skip_spp=2, skip_ref_spp=4, skip_repeat=1, moving_size=8, moving_spp=2,
-             moving_repeat=1, tex_size=8, tex_spp=1, tex_rounds=1, first_render=False,
-             anim_frames=0, anim_separate=0,
+             moving_repeat=1, env_size=(8, 8), env_spp=(1, 2), env_bsdf_spp=(2, 4),
+             env_ref_spp=8, env_repeat=1, tex_size=8, tex_spp=1, tex_rounds=1,
+             first_render=False, anim_frames=0, anim_separate=0,
              anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
              conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
                                                 thresholds=[0.5], repeats=1, ref_factor=2))
@@ -198,6 +206,12 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
                      velocity_groups.noise_rows(plan.moving_spp, plan.moving_size,
                                                 plan.moving_size, threads))
         done("moving")
+    if "environment" in sections:
+        section("environment")
+        cm.write_csv(out / "environment_nee.csv", environment.rows(
+            *plan.env_size, list(plan.env_spp), list(plan.env_bsdf_spp), plan.env_ref_spp,
+            threads, plan.env_repeat))
+        done("environment")
     if "textures" in sections:
         section("textures")
         cm.write_csv(out / "textures.csv", textures.rows(plan.tex_spp, plan.tex_size,

@@ -26,6 +26,7 @@ makes ``bpy.ops.render.render`` raise ``RuntimeError`` with the message.
 from __future__ import annotations
 
 import hashlib
+import os
 import threading
 import time
 import weakref
@@ -722,20 +723,33 @@ def enabled_passes(view_layer) -> list[str]:
 
 
 def scene_hash(scene, mode: str) -> str:
-    """A content hash of an exported core Scene (geometry, materials, lights, sky, stars,
-    and the moving objects' groups: their velocities and pivots)."""
+    """A content hash of an exported core Scene (geometry, materials, lights, sky,
+    environment map, stars, and the moving objects' groups: their velocities and
+    pivots)."""
     h = hashlib.blake2b(digest_size=16)
     for a in (scene.triangles, scene.normals, scene.material_ids, scene.background,
-              scene.tri_group):
+              scene.tri_group, scene.uvs):
         if a is not None:
             h.update(np.ascontiguousarray(a).tobytes())
     for group in scene.groups:
         for seg in group.segments:
             h.update(np.array([*seg.u, seg.t_ref, *seg.p_ref, seg.t_lo, seg.t_hi]).tobytes())
+    if scene.environment is not None:  # the world's Environment Texture
+        env = scene.environment
+        h.update(np.ascontiguousarray(env.pixels).tobytes())
+        h.update(np.array([env.strength, env.rotation_z]).tobytes())
     if scene.stars is not None:  # the world's stars (World › Stars)
         for a in (scene.stars.directions, scene.stars.temperature, scene.stars.omega):
             h.update(np.ascontiguousarray(a).tobytes())
     h.update(repr(scene.materials).encode())
+    for m in scene.materials:  # an image saved again under its name renders anew
+        for tex in m.textures():
+            if tex is not None:
+                try:
+                    st = os.stat(tex.file)
+                    h.update(f"{st.st_size}:{st.st_mtime_ns}".encode())
+                except OSError:
+                    h.update(b"missing")
     h.update(str(scene.light_triangles).encode())  # which triangles are area lights
     for light in scene.lights:
         h.update(repr(light).encode())

@@ -56,10 +56,13 @@ camera                   perspective: world matrix (scale removed), lens and sen
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -67,10 +70,18 @@ import numpy as np
 from ..core.errors import UserError
 from ..core.physics import spectrum
 from ..core.scene import job as core_job
-from ..core.scene.description import ObjectSpec, StarsSettings, frozen
+from ..core.scene.description import (
+    EnvironmentSpec,
+    ObjectSpec,
+    StarsSettings,
+    TextureSpec,
+    frozen,
+)
 from ..core.scene.geometry import Scene, scene_from_parts
+from ..core.scene.sky import load_environment
 from ..core.scene.stars import star_field
 from ..core.scene.worldlines import rest_frame_offsets
+from . import sky_bake
 
 #: Object types that ``to_mesh`` turns into triangles.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
@@ -130,6 +141,7 @@ class MeshArrays:
     triangles: np.ndarray  # float64 (T, 3, 3)
     normals: np.ndarray  # float64 (T, 3, 3) corner (shading) normals
     material_index: np.ndarray  # int32 (T,) material slot of each triangle
+    uvs: np.ndarray | None = None  # float64 (T, 3, 2) corner UVs of the render UV map
 
 
 def mesh_arrays(mesh) -> MeshArrays:
@@ -149,19 +161,35 @@ def mesh_arrays(mesh) -> MeshArrays:
     mesh.corner_normals.foreach_get("vector", corner)
     tris = co.reshape(-1, 3).astype(np.float64)[tri_vert].reshape(n_tri, 3, 3)
     normals = corner.reshape(-1, 3).astype(np.float64)[tri_loop].reshape(n_tri, 3, 3)
-    return MeshArrays(tris, normals, mat)
+    return MeshArrays(tris, normals, mat, mesh_uvs(mesh, tri_loop))
 
 
-def transform(arrays: MeshArrays, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World-space triangles and normals; winding kept front-facing under mirroring."""
+def mesh_uvs(mesh, tri_loop: np.ndarray) -> np.ndarray | None:
+    """The corner UVs (T, 3, 2) of the UV map Cycles renders with (the one marked for
+    render, else the active one), None when the mesh has none."""
+    layers = list(mesh.uv_layers)
+    layer = next((uv for uv in layers if uv.active_render), mesh.uv_layers.active)
+    if layer is None or len(mesh.loops) == 0:
+        return None
+    flat = np.empty(len(mesh.loops) * 2, np.float32)
+    layer.uv.foreach_get("vector", flat)
+    return flat.reshape(-1, 2).astype(np.float64)[tri_loop].reshape(-1, 3, 2)
+
+
+def transform(arrays: MeshArrays, matrix: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """World-space triangles, normals and the corner UVs; winding kept front-facing
+    under mirroring (the UVs follow their corners)."""
     m = np.asarray(matrix, np.float64)
     lin = m[:3, :3]
     tris = arrays.triangles @ lin.T + m[:3, 3]
     normals = arrays.normals @ np.linalg.inv(lin)  # (M^-T n) for row vectors
+    uvs = arrays.uvs
     if np.linalg.det(lin) < 0.0:
         tris = tris[:, [0, 2, 1]]
         normals = normals[:, [0, 2, 1]]
-    return tris, normals
+        uvs = None if uvs is None else uvs[:, [0, 2, 1]]
+    return tris, normals, uvs
 
 
 def matrix_np(matrix) -> np.ndarray:
@@ -215,11 +243,14 @@ class _Reader:
     label: str  # "material 'Red'", "world 'World'"
     warnings: Warnings
     blackbody: float | None = None
+    #: the image textures read, by slot ("base_color", ...): :meth:`texture`
+    textures: dict[str, TextureSpec] = field(default_factory=dict)
 
     def warn(self, text: str) -> None:
         self.warnings.add(f"{self.label}: {text}")
 
-    def color(self, node, name: str, default=(0.0, 0.0, 0.0), emission: bool = False):
+    def color(self, node, name: str, default=(0.0, 0.0, 0.0), emission: bool = False,
+              slot: str | None = None):
         sock = node.inputs.get(name)
         if sock is None:
             return np.asarray(default, np.float64)
@@ -229,10 +260,12 @@ class _Reader:
         if src.type == "RGB":
             return np.asarray(src.outputs[0].default_value[:3], np.float64)
         if src.type == "TEX_IMAGE":
+            if slot is not None and self.texture(src, name, slot, 0) is not None:
+                return np.ones(3)  # (the texture replaces the constant)
             mean = None if src.image is None else image_mean_color(src.image)
             if mean is not None:
                 self.warn(f"image texture '{src.image.name}' on '{name}' is used as its mean "
-                          "colour (the core has no textures yet)")
+                          "colour (relray textures only the Principled BSDF's inputs)")
                 return mean
             what = ("has no image" if src.image is None else
                     f"image '{src.image.name}' cannot be read (file "
@@ -248,7 +281,32 @@ class _Reader:
                   "socket's own value")
         return np.asarray(sock.default_value[:3], np.float64)
 
-    def value(self, node, name: str, default: float) -> float:
+    def texture(self, tex, name: str, slot: str, channel: int) -> TextureSpec | None:
+        """The Image Texture node ``tex`` feeding ``name`` as the material's ``slot``
+        texture (recorded in :attr:`textures`); None when its image has no file (the
+        caller then renders it as Cycles does a missing image)."""
+        image = tex.image
+        path = None if image is None else image_file(image, None)
+        if path is None:
+            return None
+        if tex.extension == "CLIP":
+            self.warn(f"image texture '{tex.name}': Clip extension is rendered as Extend")
+        space = image.colorspace_settings.name
+        data = slot not in COLOR_SLOTS
+        if not image.is_float and data and space not in ("Non-Color", "Linear Rec.709",
+                                                          "Raw"):
+            self.warn(f"image texture '{tex.name}' on '{name}' is read as data (linear), "
+                      f"not as {space}: set its Color Space to Non-Color to match")
+        elif not image.is_float and not data and space in ("Non-Color", "Raw"):
+            self.warn(f"image texture '{tex.name}' on '{name}' is read as sRGB colour, "
+                      "not as Non-Color")
+        wrap = WRAP.get(tex.extension, "repeat")
+        spec = TextureSpec(path, (wrap, wrap), uv_mapping(tex, self), channel=channel,
+                           key=f"{self.label} {name}")
+        self.textures[slot] = spec
+        return spec
+
+    def value(self, node, name: str, default: float, slot: str | None = None) -> float:
         sock = node.inputs.get(name)
         if sock is None:
             return float(default)
@@ -257,9 +315,63 @@ class _Reader:
             return float(sock.default_value)
         if src.type == "VALUE":
             return float(src.outputs[0].default_value)
+        if slot is not None and src.type in ("TEX_IMAGE", "SEPARATE_COLOR", "SEPRGB"):
+            channel = 0
+            if src.type != "TEX_IMAGE":  # one channel of an image (glTF-style packing)
+                channel = _from_socket_index(sock)
+                src = _linked_node(src.inputs[0])
+            if src is not None and src.type == "TEX_IMAGE" and \
+                    self.texture(src, name, slot, channel) is not None:
+                return float(sock.default_value)
         self.warn(f"'{name}' is driven by an unsupported '{src.bl_idname}' node: using the "
                   "socket's own value")
         return float(sock.default_value)
+
+
+def _from_socket_index(sock) -> int:
+    """Which output of the node linked to ``sock`` feeds it (through reroutes)."""
+    seen = 0
+    while sock.is_linked and seen < 64:
+        link = sock.links[0]
+        if link.from_node.type != "REROUTE":
+            return list(link.from_node.outputs).index(link.from_socket)
+        sock = link.from_node.inputs[0]
+        seen += 1
+    return 0
+
+
+#: Blender's image extension modes -> the core's wrap modes (CLIP: clamp, warned)
+WRAP = {"REPEAT": "repeat", "EXTEND": "clamp", "MIRROR": "mirror", "CLIP": "clamp"}
+#: the slots whose images hold colour (sRGB-encoded when 8/16-bit), the others data
+COLOR_SLOTS = ("base_color", "emission")
+
+
+def uv_mapping(tex, r: _Reader) -> tuple[float, float, float, float, float, float]:
+    """The affine map (a, b, c, d, e, f) from the mesh's UVs to the image's, u' = a u +
+    b v + c, v' = d u + e v + f, from a Mapping node on the texture's Vector (its
+    location, Z rotation and scale; type Point or Texture); identity without one."""
+    src = _linked_node(tex.inputs["Vector"])
+    if src is None:
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    if src.type == "UVMAP":
+        r.warn(f"image texture '{tex.name}': UV map '{src.uv_map}' is read as the mesh's "
+               "render UV map (one UV map per mesh)")
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    if src.type != "MAPPING" or src.vector_type not in ("POINT", "TEXTURE"):
+        r.warn(f"image texture '{tex.name}': the '{src.bl_idname}' coordinates are not "
+               "supported: the mesh's UVs are used")
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    loc = src.inputs["Location"].default_value
+    rot = src.inputs["Rotation"].default_value
+    scale = src.inputs["Scale"].default_value
+    if abs(rot[0]) > 1e-9 or abs(rot[1]) > 1e-9:
+        r.warn(f"image texture '{tex.name}': the mapping's X and Y rotation are ignored")
+    c, s_ = math.cos(rot[2]), math.sin(rot[2])
+    m = np.array([[scale[0] * c, -scale[1] * s_, loc[0]],
+                  [scale[0] * s_, scale[1] * c, loc[1]], [0.0, 0.0, 1.0]])
+    if src.vector_type == "TEXTURE":  # the inverse transform
+        m = np.linalg.inv(m)
+    return tuple(float(x) for x in (*m[0], *m[1]))
 
 
 def _first_input(node, *names: str):
@@ -284,7 +396,10 @@ def material_spec(mat, warnings: Warnings) -> core_job.MaterialSpec:
     if mat is None:
         return DEFAULT_MATERIAL
     r = _Reader(f"material '{mat.name_full}'", warnings)
-    return validated(core_job.material_from_dict, _material_values(mat, r), r)
+    spec = validated(core_job.material_from_dict, _material_values(mat, r), r)
+    if not r.textures:
+        return spec
+    return replace(spec, **{f"{slot}_texture": tex for slot, tex in r.textures.items()})
 
 
 def validated(parse: Callable[..., Any], table: dict[str, Any], r: _Reader) -> Any:
@@ -324,10 +439,12 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
             return _values(name, mat.diffuse_color[:3], 0.5, 0.0)
         surface, kind = shaders[0], shaders[0].type
     if kind == "BSDF_PRINCIPLED":
-        base = r.color(surface, "Base Color", (0.8, 0.8, 0.8))
+        base = r.color(surface, "Base Color", (0.8, 0.8, 0.8), slot="base_color")
         em_name = _first_input(surface, "Emission Color", "Emission")
-        em_color = r.color(surface, em_name, (0.0, 0.0, 0.0), emission=True)
+        em_color = r.color(surface, em_name, (0.0, 0.0, 0.0), emission=True, slot="emission")
         strength = r.value(surface, "Emission Strength", 1.0)
+        roughness = r.value(surface, "Roughness", 0.5, slot="roughness")
+        metallic = r.value(surface, "Metallic", 0.0, slot="metallic")
         for weight, label in (("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
                               ("Subsurface Weight", "subsurface"),
                               ("Anisotropic", "anisotropy"),
@@ -336,17 +453,18 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
                 r.warn(f"{label} is not supported and is ignored")
         transmission = r.value(surface, _first_input(surface, "Transmission Weight",
                                                      "Transmission"), 0.0)
-        if transmission > 0.0 and r.value(surface, "Roughness", 0.5) > 0.0:
+        if transmission > 0.0 and roughness > 0.0:
             r.warn("rough glass is rendered smooth (the glass lobe ignores roughness)")
         if r.value(surface, "Alpha", 1.0) < 1.0:
             r.warn("alpha (transparency) is not supported and is ignored")
-        if surface.inputs.get("Normal") is not None and surface.inputs["Normal"].is_linked:
-            r.warn("normal and bump maps are not supported and are ignored")
+        _normal_map(surface, r)
         emission, em_strength = _emission(em_color, strength)
+        if "emission" in r.textures:  # the texel (× strength) replaces the colour
+            emission, em_strength = (1.0, 1.0, 1.0), max(float(strength), 0.0)
         return _values(
             name, base,
-            roughness=r.value(surface, "Roughness", 0.5),
-            metallic=r.value(surface, "Metallic", 0.0),
+            roughness=roughness,
+            metallic=metallic,
             transmission=transmission,
             ior=r.value(surface, "IOR", 1.5),
             emission=emission, emission_strength=em_strength, blackbody=r.blackbody)
@@ -369,6 +487,23 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
     r.warn(f"surface shader '{surface.bl_idname}' is not supported: using the viewport "
            "display colour")
     return _values(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
+
+
+def _normal_map(surface, r: _Reader) -> None:
+    """A tangent-space Normal Map node fed by an Image Texture on the Normal input is the
+    material's normal texture; anything else there (bump, object space) is ignored."""
+    sock = surface.inputs.get("Normal")
+    src = _linked_node(sock) if sock is not None else None
+    if src is None:
+        return
+    tex = _linked_node(src.inputs["Color"]) if src.type == "NORMAL_MAP" else None
+    if src.type != "NORMAL_MAP" or src.space != "TANGENT" or tex is None \
+            or tex.type != "TEX_IMAGE" or r.texture(tex, "Normal", "normal", 0) is None:
+        r.warn("only tangent-space Normal Map nodes fed by an image are supported: "
+               f"'{src.bl_idname}' on Normal is ignored")
+        return
+    if abs(r.value(src, "Strength", 1.0) - 1.0) > 1e-6:
+        r.warn("the Normal Map's strength is rendered as 1")
 
 
 def _values(name: str, base, roughness: float = 0.5, metallic: float = 0.0,
@@ -488,6 +623,81 @@ def world_background(world, warnings: Warnings) -> np.ndarray:
     return np.maximum(color * r.value(node, "Strength", 1.0), 0.0)
 
 
+def world_environment(world, folder: Path | None, warnings: Warnings
+                      ) -> EnvironmentSpec | None:
+    """The world's Environment Texture (linked to its Background's Color, possibly
+    through a Mapping node that turns it about Z) as the job's ``scene.environment``,
+    or the bake of a procedural sky (:mod:`.sky_bake`), or None. A packed image is
+    written into ``folder`` (a temporary one when None). Blender's Mapping node turns
+    the lookup vector by θ, which turns the map by -θ: ``rotation_z = -θ``
+    (job-format.md, "Skies")."""
+    tree = node_tree(world) if world is not None else None
+    out = (tree.get_output_node("CYCLES") or tree.get_output_node("ALL")) if tree else None
+    bg = _linked_node(out.inputs["Surface"]) if out is not None else None
+    if bg is None or bg.type != "BACKGROUND":
+        return None
+    tex = _linked_node(bg.inputs["Color"])
+    if tex is not None and tex.type != "TEX_ENVIRONMENT":  # a procedural sky: its bake
+        baked = sky_bake.baked_path(world)
+        if baked.is_file():
+            return EnvironmentSpec(baked, 1.0, 0.0)
+        warnings.add(f"world '{world.name}': its sky ('{tex.bl_idname}') is procedural and "
+                     "not baked: World › Sky › Bake Sky (the farm export bakes it); "
+                     "rendered with a constant colour")
+        return None
+    if tex is None or tex.image is None:
+        return None
+    if tex.projection != "EQUIRECTANGULAR":
+        warnings.add(f"world '{world.name}': the environment's {tex.projection.lower()} "
+                     "projection is not supported: rendered as equirectangular")
+    path = image_file(tex.image, folder)
+    if path is None:
+        warnings.add(f"world '{world.name}': the environment image '{tex.image.name}' has "
+                     "no file: the sky is black")
+        return None
+    rotation = 0.0
+    mapping = _linked_node(tex.inputs["Vector"])
+    if mapping is not None and mapping.type == "MAPPING":
+        rotation = -math.degrees(float(mapping.inputs["Rotation"].default_value[2])) \
+            if "Rotation" in mapping.inputs else 0.0
+    r = _Reader(f"world '{world.name}'", warnings)
+    return EnvironmentSpec(path, max(r.value(bg, "Strength", 1.0), 0.0), rotation)
+
+
+def world_environment_image(spec: EnvironmentSpec | None, world):
+    """:func:`core.scene.sky.load_environment` of the world's map; an unreadable image
+    stops the export with one line naming the world and the image."""
+    try:
+        return load_environment(spec, None)
+    except UserError as e:
+        raise ExportError(f"world '{world.name}': the environment image: {e.detail}") \
+            from None
+
+
+def unpack_folder() -> Path:
+    """This Blender session's folder for packed images (in the temporary folder)."""
+    path = Path(tempfile.gettempdir()) / f"relray-unpacked-{os.getpid()}"
+    path.mkdir(exist_ok=True)
+    return path
+
+
+def image_file(image, folder: Path | None) -> Path | None:
+    """A file holding ``image``: its own file on disk, or a packed image's bytes written
+    into ``folder``; None when it has none (a generated image, a missing file)."""
+    import bpy  # (the add-on's export runs inside Blender)
+
+    if image.packed_file is not None:
+        folder = unpack_folder() if folder is None else folder
+        suffix = Path(image.filepath).suffix or ".png"
+        path = folder / f"{bpy.path.clean_name(image.name)}{suffix}"
+        path.write_bytes(bytes(image.packed_file.data))
+        return path
+    if image.source == "FILE":
+        path = Path(bpy.path.abspath(image.filepath, library=image.library))
+        return path if path.is_file() else None
+    return None
+
+
 def world_stars(world) -> StarsSettings | None:
     """The world's stars (World › Stars) as the job's ``scene.stars``, or None."""
     s = getattr(world, "relray", None) if world is not None else None
@@ -589,6 +799,8 @@ class ExportedScene:
     rendered: set[str] = field(default_factory=set)
     #: the world's stars (World › Stars), None without
     stars: StarsSettings | None = None
+    #: the world's environment map (an Environment Texture on its Background), or None
+    environment: EnvironmentSpec | None = None
 
 
 @dataclass
@@ -601,6 +813,7 @@ class _Builder:
     tris: list[np.ndarray] = field(default_factory=list)
     normals: list[np.ndarray] = field(default_factory=list)
     ids: list[np.ndarray] = field(default_factory=list)
+    uvs: list[np.ndarray] = field(default_factory=list)
     motions: list[ObjectSpec | None] = field(default_factory=list)  # per add(): None static
 
     def material_id(self, mat) -> int:
@@ -611,11 +824,12 @@ class _Builder:
         return self.index[key]
 
     def add(self, tris: np.ndarray, normals: np.ndarray, ids: np.ndarray,
-            motion: ObjectSpec | None = None) -> None:
+            motion: ObjectSpec | None = None, uvs: np.ndarray | None = None) -> None:
         if len(tris):
             self.tris.append(tris)
             self.normals.append(normals)
             self.ids.append(np.asarray(ids, np.int32))
+            self.uvs.append(np.zeros((len(tris), 3, 2)) if uvs is None else uvs)
             self.motions.append(motion)
 
     def moving_groups(self) -> tuple[np.ndarray | None, tuple]:
@@ -706,6 +920,7 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
         cam_eval = cam.evaluated_get(depsgraph)
         camera = camera_settings(cam_eval, width, height, scene.render, warnings)
 
+    environment = world_environment(scene.world, None, warnings)
     b = _Builder(warnings)
     lights: list[core_job.LightSpec] = []
     cache: dict[tuple, tuple[MeshArrays, list]] = {}
@@ -754,13 +969,13 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
                              "from its animation (Object › Relativity › Motion)")
         else:
             motion = object_motion(obj, matrix)
-        tris, normals = transform(arrays, matrix)
+        tris, normals, uvs = transform(arrays, matrix)
         if motion is not None and motion.worldline is None:
             if inst.is_instance:
                 moving_instances.add(obj.original.name)
             else:
                 moving[obj.original.name] = (np.array(motion.velocity), np.array(motion.pivot))
-        b.add(tris, normals, slot_ids[idx], motion)
+        b.add(tris, normals, slot_ids[idx], motion, uvs)
 
     empty = np.zeros((0, 3, 3))
     tri_group, groups = b.moving_groups()
@@ -769,8 +984,11 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
             np.concatenate(b.tris) if b.tris else empty,
             np.concatenate(b.normals) if b.normals else empty,
             np.concatenate(b.ids) if b.ids else np.zeros(0, np.int32),
-            b.materials, lights, world_background(scene.world, warnings), camera,
-            tri_group=tri_group, groups=groups)
+            b.materials, lights,
+            np.zeros(3) if environment else world_background(scene.world, warnings),
+            camera, tri_group=tri_group, groups=groups,
+            uvs=np.concatenate(b.uvs) if b.uvs else None,
+            environment=world_environment_image(environment, scene.world))
     except UserError as e:
         raise ExportError(f"the scene has no geometry to render ({e.detail})") from None
     stars = world_stars(scene.world)
@@ -781,4 +999,4 @@ def export_scene(depsgraph, camera_obj=None, width: int | None = None,
     return ExportedScene(core_scene, camera, width, height, warnings, by_material, lights,
                          seconds=time.perf_counter() - t0, instances=count, moving=moving,
                          moving_instances=moving_instances, rendered=rendered,
-                         animated=dict(animated), stars=stars)
+                         animated=dict(animated), stars=stars, environment=environment)

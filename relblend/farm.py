@@ -55,6 +55,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import shutil
 import struct
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -64,7 +65,7 @@ from typing import Any
 
 import numpy as np
 
-from . import export, motion
+from . import export, motion, sky_bake
 
 GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
@@ -190,7 +191,6 @@ def colour_management(scene, out: Path, warnings: list[str]) -> dict[str, Any]:
     (or "auto" with Auto Exposure) as ``output.exposure``. Gamma and curves are not
     carried (warned)."""
     import os
-    import shutil
 
     import bpy
 
@@ -300,12 +300,15 @@ def write_glb(path: Path, doc: dict[str, Any], binary: bytes) -> None:
     path.write_bytes(struct.pack("<4sII", GLB_MAGIC, 2, 12 + len(chunks)) + chunks)
 
 
-def patch_materials(doc: dict[str, Any], specs: dict[str, Any], drop: set[str]) -> int:
-    """Overwrite glTF materials with the add-on's specs; drop primitives of ``drop``.
+def patch_materials(doc: dict[str, Any], specs: dict[str, Any], drop: set[str],
+                    out: Path | None = None, warnings: export.Warnings | None = None) -> int:
+    """Overwrite glTF materials with the add-on's specs (their image textures copied
+    into ``out``/textures: :class:`GltfTextures`); drop primitives of ``drop``.
 
     Returns the number of primitives removed. Materials are matched by name.
     """
     mats = doc.get("materials", [])
+    images = GltfTextures(doc, out, warnings if warnings is not None else export.Warnings())
     for m in mats:
         spec = specs.get(m.get("name"))
         if spec is None:
@@ -317,10 +320,11 @@ def patch_materials(doc: dict[str, Any], specs: dict[str, Any], drop: set[str]) 
             "metallicFactor": float(spec.metallic),
             "roughnessFactor": float(spec.roughness),
         }
+        images.add_material(m, spec)
         ext = {k: v for k, v in m.get("extensions", {}).items()
                if k not in ("KHR_materials_emissive_strength", "KHR_materials_transmission",
                             "KHR_materials_ior", "KHR_materials_unlit")}
-        if spec.emission_strength > 0.0 and any(spec.emission):
+        if spec.emission_strength > 0.0 and (any(spec.emission) or "emissiveTexture" in m):
             m["emissiveFactor"] = [float(x) for x in spec.emission]
             ext["KHR_materials_emissive_strength"] = {
                 "emissiveStrength": float(spec.emission_strength)}
@@ -331,7 +335,7 @@ def patch_materials(doc: dict[str, Any], specs: dict[str, Any], drop: set[str]) 
         ext["KHR_materials_ior"] = {"ior": float(spec.ior)}
         m["extensions"] = ext
         used = set(doc.get("extensionsUsed", []))
-        doc["extensionsUsed"] = sorted(used | set(ext))
+        doc["extensionsUsed"] = sorted(used | set(ext) | images.extensions)
     removed = 0
     drop_ids = {i for i, m in enumerate(mats) if m.get("name") in drop}
     for mesh in doc.get("meshes", []):
@@ -505,8 +509,120 @@ def _light_table(light) -> dict[str, Any]:
     return t
 
 
+#: glTF sampler wrap codes of the core's wrap modes
+GLTF_WRAP = {"repeat": 10497, "clamp": 33071, "mirror": 33648}
+
+
+@dataclass
+class GltfTextures:
+    """The image textures of the add-on's materials, written into a glTF document: each
+    file copied once into ``out``/textures and referenced by URI (beside the glb), with
+    a sampler of its wrap modes and its UV map as KHR_texture_transform. glTF keeps the
+    image's top-left origin; the core's importer turns v into 1 - v as Blender's does,
+    so a map M, t of Blender's UVs is F M F, F (M e + t) + e in glTF's (F = diag(1, -1),
+    e = (0, 1))."""
+
+    doc: dict[str, Any]
+    out: Path | None
+    warnings: export.Warnings
+    extensions: set[str] = field(default_factory=set)
+    _index: dict[tuple, int] = field(default_factory=dict)
+
+    def add_material(self, m: dict[str, Any], spec) -> None:
+        """Add ``spec``'s textures to the glTF material ``m`` (its factors become 1 where a
+        texture replaces the constant: glTF multiplies them)."""
+        if self.out is None:
+            return
+        pbr = m["pbrMetallicRoughness"]
+        if spec.base_color_texture is not None:
+            pbr["baseColorTexture"] = self.info(spec.base_color_texture)
+            pbr["baseColorFactor"] = [1.0, 1.0, 1.0, 1.0]
+        if spec.emission_texture is not None:
+            m["emissiveTexture"] = self.info(spec.emission_texture)
+        if spec.normal_texture is not None:
+            m["normalTexture"] = self.info(spec.normal_texture)
+        self.metallic_roughness(pbr, spec, m.get("name", ""))
+
+    def metallic_roughness(self, pbr: dict[str, Any], spec, name: str) -> None:
+        """glTF's one metallicRoughness image (G roughness, B metallic): the material's
+        roughness and metallic textures when they fit it, else their constants."""
+        rough, metal = spec.roughness_texture, spec.metallic_texture
+        if rough is None and metal is None:
+            return
+        tex = rough if rough is not None else metal
+        fits = ((rough is None or rough.channel == 1) and (metal is None or metal.channel == 2)
+                and (rough is None or metal is None
+                     or (rough.file == metal.file and rough.uv == metal.uv)))
+        if not fits or (metal is None and spec.metallic != 0.0):
+            self.warnings.add(f"material '{name}': its roughness and metallic textures do "
+                              "not fit glTF's one metallicRoughness image (G roughness, B "
+                              "metallic): the farm renders their constants")
+            return
+        pbr["metallicRoughnessTexture"] = self.info(tex)
+        pbr["roughnessFactor"] = 1.0 if rough is not None else float(spec.roughness)
+        pbr["metallicFactor"] = 1.0 if metal is not None else 0.0
+
+    def info(self, tex) -> dict[str, Any]:
+        """A textureInfo of ``tex``: its image and sampler, and its UV map."""
+        entry: dict[str, Any] = {"index": self.texture_index(tex)}
+        transform = khr_texture_transform(tex.uv)
+        if transform is not None:
+            entry["extensions"] = {"KHR_texture_transform": transform}
+            self.extensions.add("KHR_texture_transform")
+        return entry
+
+    def texture_index(self, tex) -> int:
+        key = (str(tex.file), tuple(tex.wrap))
+        if key not in self._index:
+            folder = self.out / "textures"
+            folder.mkdir(exist_ok=True)
+            target = folder / _safe_name(Path(tex.file).name)
+            if Path(tex.file).resolve() != target.resolve():
+                shutil.copyfile(tex.file, target)
+            images = self.doc.setdefault("images", [])
+            images.append({"uri": f"textures/{target.name}"})
+            samplers = self.doc.setdefault("samplers", [])
+            samplers.append({"wrapS": GLTF_WRAP[tex.wrap[0]], "wrapT": GLTF_WRAP[tex.wrap[1]]})
+            textures = self.doc.setdefault("textures", [])
+            textures.append({"source": len(images) - 1, "sampler": len(samplers) - 1})
+            self._index[key] = len(textures) - 1
+        return self._index[key]
+
+
+def khr_texture_transform(uv) -> dict[str, Any] | None:
+    """KHR_texture_transform (offset, rotation, scale) of the affine UV map ``uv`` in
+    Blender's convention (:class:`GltfTextures`), None for the identity; a map with shear
+    (not rotation × scale) keeps its nearest rotation × scale."""
+    a, b, c, d, e_, f = (float(x) for x in uv)
+    if (a, b, c, d, e_, f) == (1.0, 0.0, 0.0, 0.0, 1.0, 0.0):
+        return None
+    m = np.array([[a, b], [d, e_]])
+    flip = np.diag([1.0, -1.0])
+    up = np.array([0.0, 1.0])
+    mg = flip @ m @ flip
+    tg = flip @ (m @ up + np.array([c, f])) + up
+    # glTF: M = R S with R = [[cos r, sin r], [-sin r, cos r]], S = diag(sx, sy)
+    r = math.atan2(-mg[1, 0], mg[0, 0])
+    sx = math.hypot(mg[0, 0], mg[1, 0])
+    sy = mg[0, 1] * math.sin(r) + mg[1, 1] * math.cos(r)
+    return {"offset": [float(tg[0]), float(tg[1])], "rotation": float(r),
+            "scale": [float(sx), float(sy)]}
+
+
 def _safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "material"
+
+
+def farm_environment(env, out: Path) -> dict[str, Any]:
+    """The job's ``scene.environment``: the map copied into ``out``/textures (the farm
+    folder travels whole), its strength and rotation."""
+    folder = out / "textures"
+    folder.mkdir(exist_ok=True)
+    target = folder / _safe_name(Path(env.file).name)
+    if Path(env.file).resolve() != target.resolve():
+        shutil.copyfile(env.file, target)
+    return {"file": f"textures/{target.name}", "strength": float(env.strength),
+            "rotation_z": float(env.rotation_z)}
 
 
 def export_farm(context, directory: str | Path, frames: tuple[int, int] | None = None,
@@ -535,6 +651,8 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
         check_static_camera(samples)
         motion_doc = motion_table(cam.data.relray.mode, samples)
 
+    if sky_bake.is_procedural(scene.world):  # (an operator: it may render the bake)
+        sky_bake.bake(scene.world)
     glb = out / "scene.glb"
     with render_modifier_settings(scene):
         depsgraph = context.evaluated_depsgraph_get()
@@ -556,7 +674,7 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
                                   f"'{sorted(hot)[0]}', which the farm export writes as a "
                                   "static mesh; give it an emission colour instead")
     doc, binary = read_glb(glb)
-    patch_materials(doc, specs, special)
+    patch_materials(doc, specs, special, out, exported.warnings)
     patch_motion(doc, moving)
     write_glb(glb, doc, binary)
 
@@ -591,6 +709,8 @@ def export_farm(context, directory: str | Path, frames: tuple[int, int] | None =
         "motion": motion_doc,
         "scene": {"file": "scene.glb",
                   "background": [float(x) for x in exported.scene.background],
+                  **({"environment": farm_environment(exported.environment, out)}
+                     if exported.environment is not None else {}),
                   **({"stars": {"catalog": exported.stars.catalog,
                                 "magnitude_limit": exported.stars.magnitude_limit,
                                 "brightness": exported.stars.brightness}}

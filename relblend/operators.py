@@ -132,6 +132,28 @@ class RELRAY_MT_motion_presets(bpy.types.Menu):  # noqa: N801 - Blender naming
             op.filepath = str(path)
 
 
+class RELRAY_OT_bake_sky(bpy.types.Operator):  # noqa: N801 - Blender naming
+    """Render the world's procedural sky (Sky Texture, any nodes) into an environment map
+    for the Relativistic engine (Cycles, once per setting)"""
+
+    bl_idname = "relray.bake_sky"
+    bl_label = "Bake Sky"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        from .sky_bake import is_procedural
+
+        return context.scene.world is not None and is_procedural(context.scene.world)
+
+    def execute(self, context):
+        from .sky_bake import bake
+
+        path = bake(context.scene.world)
+        self.report({"INFO"}, f"Baked the sky into {path}")
+        return {"FINISHED"}
+
+
 class RELRAY_OT_export_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
     """Write scene.glb and a job TOML with every frame's β and ct' for `relray render`"""
 
@@ -328,6 +350,7 @@ class RELRAY_OT_render_farm(bpy.types.Operator):  # noqa: N801 - Blender naming
 
 
 classes = (
+    RELRAY_OT_bake_sky,
     RELRAY_OT_add_velocity_keyframe,
     RELRAY_OT_speed_of_light_preset,
     RELRAY_OT_load_motion_preset,

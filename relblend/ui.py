@@ -212,6 +212,36 @@ class RELRAY_PT_object_relativity(RelrayPanel, bpy.types.Panel):  # noqa: N801 -
             layout.label(text="Its location is where it is at lab time 0", icon="INFO")
 
 
+class RELRAY_PT_world_sky(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
+    """World › Sky: what the Relativistic engine uses as the sky, and the bake of a
+    procedural one (relblend/sky_bake.py)."""
+
+    bl_label = "Sky"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return context.world is not None and super().poll(context)
+
+    def draw(self, context):
+        from .sky_bake import background_source, baked_path
+
+        layout = self.layout
+        world = context.world
+        src = background_source(world)
+        if src is None:
+            layout.label(text="A constant colour (the Background node's)", icon="INFO")
+        elif src.type == "TEX_ENVIRONMENT":
+            name = src.image.name if src.image is not None else "no image"
+            layout.label(text=f"Environment map: {name}", icon="IMAGE_DATA")
+        else:
+            baked = baked_path(world).is_file()
+            layout.label(text=f"Procedural ({src.bl_label}): "
+                              + ("baked" if baked else "not baked, rendered as a colour"),
+                         icon="CHECKMARK" if baked else "ERROR")
+            layout.operator("relray.bake_sky", icon="RENDER_STILL")
+
+
 class RELRAY_PT_world_stars(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender naming
     """World › Stars: the real star sky (``scene.stars`` of the job)."""
 
@@ -362,6 +392,7 @@ classes = (
     RELRAY_PT_scene_relativity,
     RELRAY_PT_camera_relativity,
     RELRAY_PT_object_relativity,
+    RELRAY_PT_world_sky,
     RELRAY_PT_world_stars,
     RELRAY_PT_relativity_summary,
     RELRAY_PT_sampling,

@@ -30,6 +30,7 @@ from ..physics import relativity, spectrum
 from ..scene.description import Job, RenderSettings
 from ..scene.geometry import Scene, build_scene
 from ..scene.motion import resolve_camera
+from . import environment
 from .accel import MISS_DISTANCE, Accel
 from .camera import PinholeCamera
 from .film import Film, clamp_samples
@@ -124,7 +125,13 @@ def prepare(scene: Scene, mode: str) -> PreparedScene:
                               else scene.lab_triangles(), origin)
     tables = build_tables(list(scene.materials), mode)
     textures = scene_textures(scene, tables, mode)
-    lights = build_lights(scene, tables, origin, geom["area"].astype(np.float64), radius)
+    env_image = scene.environment
+    env_row = (tables.add_emission_row(environment.base_row(mode)) if env_image is not None
+               else -1)
+    env_power = (environment.power_estimate(env_image, radius)
+                 if env_image is not None and environment.NEE else 0.0)
+    lights = build_lights(scene, tables, origin, geom["area"].astype(np.float64), radius,
+                          env_power)
     tracer: Accel | MovingScene | None = accel
     segments = None
     if groups:
@@ -136,7 +143,8 @@ def prepare(scene: Scene, mode: str) -> PreparedScene:
     emits = tables.mat_emit_row[scene.material_ids[n_geometry:n_static]] >= 0
     area_tris = np.arange(n_geometry, n_static, dtype=np.int32)[emits]
     kscene = kernel_scene(extent, scene.normals, scene.material_ids, tables, lights, geom,
-                          segments, area_tris, textures)
+                          segments, area_tris,
+                          environment.kernel_environment(env_image, mode, env_row), textures)
     return PreparedScene(scene, accel, tables, lights, kscene, radius, mode, tracer, origin)
 
 

@@ -89,7 +89,18 @@ from .bsdf import (
     principled_eval,
     principled_sample,
 )
+from .environment import (
+    KernelEnvironment,
+    env_bilinear,
+    env_lane,
+    env_lane_bilinear,
+    env_light_sample,
+    env_pdf,
+    env_texel,
+    kernel_environment,
+)
 from .lights import (
+    ENV,
     LightTable,
     light_record,
     sample_light,
@@ -180,6 +191,14 @@ class KernelScene(NamedTuple):
     beam: bool          # bodies apply D⁵ (``searchlight``)
     area_tris: np.ndarray  # int32 (A,): the area lights' triangles (in no BVH), often none
     mat_rgb: np.ndarray  # float32 (M, 3): base colours, linear Rec.709 (denoising albedo)
+    # the environment map (environment.KernelEnvironment; env_on False: none, 1×1 tables)
+    env_on: bool
+    env_tex: np.ndarray   # float32 (H, W, 4): per texel (c0, c1, c2, k) or rgb (r, g, b, 1)
+    env_marg: np.ndarray  # float64 (H + 1,): CDF over rows
+    env_cond: np.ndarray  # float64 (H, W + 1): CDF over each row's columns
+    env_pmf: np.ndarray   # float32 (H, W): probability of each texel
+    env_rot: float        # rotation_z, radians
+    env_row: int          # emission row of E(λ) (D65_ext; rgb mode: ones)
     tex: TextureTable    # image textures and UVs (:mod:`.textures`; none: ``no_textures``)
 
 
@@ -235,11 +254,15 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
                  geometry: dict[str, np.ndarray],
                  segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                  area_tris: np.ndarray | None = None,
+                 env: KernelEnvironment | None = None,
                  textures: TextureTable | None = None) -> KernelScene:
     """Pack the scene for the kernels (``extent``: the largest BVH's, for the ray offset;
     ``segments``: :meth:`.rest_frames.MovingScene.segment_table`; ``area_tris``: the
-    triangles of area lights, which are in no BVH: :func:`cross_area_lights`;
-    ``textures``: :func:`.textures.build_textures`, None: no material has a texture)."""
+    triangles of area lights, which are in no BVH: :func:`cross_area_lights`; ``env``:
+    the environment map's tables, None for none; ``textures``:
+    :func:`.textures.build_textures`, None: no material has a texture)."""
+    if env is None:
+        env = kernel_environment(None, "rgb", 0)
     if segments is None:
         segments = (np.zeros((0, 3)), np.zeros(0), np.ones(0), np.zeros(0), np.zeros((0, 3)),
                     np.zeros((0, 3)))
@@ -259,7 +282,10 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
         int(lights.sky_row), ray_offset(extent), *segments, l_seg, False, False,
         np.zeros(0, np.int32) if area_tris is None else np.ascontiguousarray(area_tris,
                                                                              np.int32),
-        mat_rgb, no_textures(len(tables.mat_alpha)) if textures is None else textures)
+        mat_rgb, bool(env.on), np.ascontiguousarray(env.tex, np.float32),
+        np.ascontiguousarray(env.marg, np.float64), np.ascontiguousarray(env.cond, np.float64),
+        np.ascontiguousarray(env.pmf, np.float32), float(env.rot), int(env.row),
+        no_textures(len(tables.mat_alpha)) if textures is None else textures)
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
@@ -510,6 +536,14 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     table columns ``li``/``lf`` (:func:`column_split`); ``e_row``/``e_val`` cache per
     path the emission row that next-event estimation looked up last (``e_row`` = -1:
     none yet), so a path that keeps sampling the same light reads its spectrum once.
+
+    An environment map (``KernelScene.env_*``, :mod:`.environment`; ``env_on``) replaces
+    the constant sky: a miss looks it up by the ray's lab direction and lab lanes (a ray
+    that left a moving body was turned back into the lab there), MIS-weighted against
+    next-event estimation with its pdf at depth > 0 (bilinear where the weight is 1:
+    camera rays, after delta bounces); next-event estimation samples it as the light of
+    kind ``lights.ENV`` and evaluates its radiance per lane in the sampled direction (the
+    per-path ``e_row``/``e_val`` cache, for direction-independent spectra, is not used).
     """
     # the arrays as locals: reading them from the tuples inside the loop costs an
     # atomic reference-count increment and decrement per access (measured: ~40 % of the
@@ -518,7 +552,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
-     s_beam, _, s_mat_rgb, s_tex) = sc
+     s_beam, _, s_mat_rgb, s_env_on, s_env_tex, s_env_marg, s_env_cond, s_env_pmf, s_env_rot,
+     s_env_row, s_tex) = sc
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
      t_mat_flag, t_nscale, t_estr, t_trans, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65,
      t_rgb, t_on, _, _) = s_tex
@@ -536,6 +571,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     n_alive = 0
     n_sh = 0
     rho_j = np.zeros(4, np.float64)   # ρ(λ_lab) of the hit's material per hero lane
+    rgb_lanes = nlanes == 3
     alb = np.zeros(3, np.float64)     # the hit's base colour (linear Rec.709)
     for i in range(n):
         pi = idx[i]
@@ -550,6 +586,26 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     w = power_heuristic(prev_pdf[pi], sky_light_pdf(s_sky_pmf))
                 for j in range(nlanes):
                     L[pi, j] += thr[pi, j] * w * lerp(s_emit, s_sky_row, li[pi, j], lf[pi, j])
+            elif s_env_on and (depth > 0 or sky_seen):
+                # the map at the ray's lab direction (a ray that left a moving body was
+                # turned back into the lab there: lab direction, lab lanes)
+                w = 1.0
+                if depth > 0 and prev_delta[pi] == 0 and s_sky_pmf > 0.0:
+                    w = power_heuristic(prev_pdf[pi],
+                                        s_sky_pmf * env_pdf(s_env_pmf, s_env_rot, dx, dy, dz))
+                if prev_delta[pi] == 1:  # seen directly or through a delta bounce:
+                    # bilinear (no light sampling to agree with; environment.py)
+                    q_e = env_bilinear(s_env_tex, s_env_rot, dx, dy, dz)
+                    for j in range(nlanes):
+                        L[pi, j] += thr[pi, j] * env_lane_bilinear(
+                            s_env_tex, q_e, j, rgb_lanes, lamu[pi, j],
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
+                else:
+                    r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
+                    for j in range(nlanes):
+                        L[pi, j] += thr[pi, j] * w * env_lane(
+                            s_env_tex, r_e, c_e, j, rgb_lanes, lamu[pi, j],
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
@@ -691,13 +747,19 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             light = light_record(k, s_l_kind, s_l_prim, s_l_pos, s_l_dir, s_l_scale, s_l_spot,
                                  s_v0, s_e1, s_e2, s_ng, s_area, s_tri_mat, s_mat_one_sided)
             ls = s_l_seg[k]
+            is_env = s_l_kind[k] == ENV
             d_l = 1.0  # the Doppler factor the light's spectrum is looked up with
             r_l = 0.0  # a moving light's rest-frame distance
             if moving:  # lights are sampled in the lab, from the hit's lab point
                 eps_l = ray_offset_at(s_eps, pl[0], pl[1], pl[2])
-                wi, p_l, scale, delta, finite, target, ok = sample_light(
-                    light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, pl[0], pl[1], pl[2],
-                    eps_l)
+                if is_env:
+                    wi, p_l, scale, delta, finite, target, ok = env_light_sample(
+                        s_env_marg, s_env_cond, s_env_pmf, s_env_rot, p_sel,
+                        rescale_uniform(u_a, cdf_k, p_sel), u2)
+                else:
+                    wi, p_l, scale, delta, finite, target, ok = sample_light(
+                        light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, pl[0], pl[1],
+                        pl[2], eps_l)
                 # ... and seen in S_u: wi_u and D_out = γ_u (1 + u·wi); the pdf per S_u
                 # solid angle is p_l D_out² (dΩ_u = dΩ_lab / D_out²)
                 wux, wuy, wuz, inv_dout = aberrate_doppler_ray(wi[0], wi[1], wi[2], -sh[0],
@@ -729,12 +791,40 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 ok, kd, km, s, c = nee_factors(wo, wi, nrm, g, p_r * d_l * d_l, scale, delta,
                                                ok, wd, wm, a2)
             else:
-                wi, p_l, scale, delta, finite, target, ok = sample_light(
-                    light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, p[0], p[1], p[2],
-                    eps)
+                if is_env:
+                    wi, p_l, scale, delta, finite, target, ok = env_light_sample(
+                        s_env_marg, s_env_cond, s_env_pmf, s_env_rot, p_sel,
+                        rescale_uniform(u_a, cdf_k, p_sel), u2)
+                else:
+                    wi, p_l, scale, delta, finite, target, ok = sample_light(
+                        light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, p[0], p[1],
+                        p[2], eps)
                 ok, kd, km, s, c = nee_factors(wo, wi, nrm, g, p_l, scale, delta, ok, wd, wm,
                                                a2)
-            if ok:
+            if ok and is_env:  # the map's radiance in direction wi (lab), per lane at
+                # D_l λ (D_l = D_out from a moving vertex, else 1), times D_l⁵
+                lshift = math.log(d_l) * INV_DLOG if s_shift else 0.0
+                if s_beam:
+                    c *= d_l * d_l * d_l * d_l * d_l
+                r_e, c_e = env_texel(s_env_tex, s_env_rot, wi[0], wi[1], wi[2])
+                for j in range(nlanes):
+                    lu = lamu[pi, j] + lshift
+                    sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
+                        * env_lane(s_env_tex, r_e, c_e, j, rgb_lanes, lu,
+                                   lerp_at(s_emit, s_env_row, lu, top))
+                if moving:
+                    so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
+                    so, sd, st = shadow_ray_from(so, target, wi, False)
+                    sh_t0[n_sh] = t_ev + dt_o
+                else:
+                    so, sd, st = shadow_ray(p, g, eps, target, wi, False)
+                    sh_t0[n_sh] = t_ev
+                sh_idx[n_sh] = pi
+                sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = so[0], so[1], so[2]
+                sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]
+                sh_t[n_sh] = st
+                n_sh += 1
+            elif ok:
                 row = s_l_row[k]
                 if moving or ls >= 0:  # the light's spectrum at D_l λ, times D_l⁵: at a
                     # moving vertex D_l = D_out (λ_lab′ = D_out λ_rest), towards a moving

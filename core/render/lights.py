@@ -12,6 +12,7 @@ estimate with a uniform share (:func:`selection_pmf`), then a point or direction
 | spot | its position | delta | point × smoothstep cone mask (size, blend) |
 | sun | its direction | delta | E(λ), the irradiance in W/m² |
 | sky | uniform sphere | p_sel / (4π) | the background's L(λ) |
+| environment | ∝ texel power (:mod:`.environment`) | p_sel · env_pdf(ω) | the map's L(ω, λ) |
 
 Positions are in the accelerator's local coordinates (lab minus ``Accel.origin``). An
 emissive triangle of a moving object with one inertial segment (a constant velocity) is
@@ -40,7 +41,7 @@ from ..physics import spectrum
 from .materials import SpectralTables, light_spectrum
 from .sampling import uniform_sphere, uniform_triangle
 
-TRIANGLE, POINT, SPOT, SUN, SKY = 0, 1, 2, 3, 4
+TRIANGLE, POINT, SPOT, SUN, SKY, ENV = 0, 1, 2, 3, 4, 5
 UNIFORM_SHARE = 0.5
 
 
@@ -72,8 +73,13 @@ def row_luminance(row: np.ndarray, mode: str) -> float:
 
 
 def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.ndarray,
-                 radius: float) -> LightTable:
-    """The light table of ``scene`` (see the module table); ``radius`` bounds the scene."""
+                 radius: float, env_power: float = 0.0) -> LightTable:
+    """The light table of ``scene`` (see the module table); ``radius`` bounds the scene.
+
+    ``env_power`` > 0 (:func:`.environment.power_estimate`) adds the environment map
+    as one light of kind ENV in the constant sky's place (the map replaces the
+    background); its selection probability is then ``sky_pmf`` (``sky_row`` stays -1).
+    """
     mode = tables.mode
     kinds, prims, pos, dirs, rows, scales, spots, power = [], [], [], [], [], [], [], []
     emit_rows = tables.mat_emit_row[scene.material_ids]
@@ -121,6 +127,10 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
         kinds.append(SKY), prims.append(-1), pos.append((0, 0, 0)), dirs.append((0, 0, 1))
         segs.append(-1)
         rows.append(sky_row), scales.append(1.0), spots.append((0, 0)), power.append(est)
+    if env_power > 0.0:
+        kinds.append(ENV), prims.append(-1), pos.append((0, 0, 0)), dirs.append((0, 0, 1))
+        segs.append(-1)
+        rows.append(-1), scales.append(1.0), spots.append((0, 0)), power.append(env_power)
     pmf = selection_pmf(np.asarray(power, np.float64))
     cdf = np.concatenate([[0.0], np.cumsum(pmf)])
     if len(cdf) > 1:
@@ -129,7 +139,7 @@ def build_lights(scene, tables: SpectralTables, origin: np.ndarray, area: np.nda
     kinds_a = np.asarray(kinds, np.int32)
     prims_a = np.asarray(prims, np.int32)
     tri_pmf[prims_a[kinds_a == TRIANGLE]] = pmf[kinds_a == TRIANGLE]
-    sky_pmf = float(pmf[kinds_a == SKY].sum()) if len(pmf) else 0.0
+    sky_pmf = float(pmf[(kinds_a == SKY) | (kinds_a == ENV)].sum()) if len(pmf) else 0.0
     return LightTable(kinds_a, prims_a, np.asarray(pos, np.float32).reshape(-1, 3),
                       np.asarray(dirs, np.float32).reshape(-1, 3), np.asarray(rows, np.int32),
                       np.asarray(scales, np.float32), np.asarray(spots, np.float32).reshape(-1, 2),

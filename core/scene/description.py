@@ -360,6 +360,21 @@ class StarsSettings:
 
 
 @dataclass(frozen=True)
+class EnvironmentSpec:
+    """``scene.environment``: an equirectangular map of lab radiance at infinity.
+
+    ``file`` is resolved (absolute) and was readable when the job was parsed; texels are
+    linear Rec.709 radiance × ``strength`` (finite, >= 0); ``rotation_z`` (degrees,
+    finite) turns the map about +Z, adding to the azimuth φ = π − 2πu (physics.md,
+    "Skies"; :mod:`relray.core.render.environment`).
+    """
+
+    file: Path
+    strength: float = 1.0
+    rotation_z: float = 0.0
+
+
+@dataclass(frozen=True)
 class SceneSpec:
     """The ``[scene]`` table plus the materials, objects and lights (includes merged)."""
 
@@ -370,6 +385,7 @@ class SceneSpec:
     lights: tuple[LightSpec, ...]
     includes: tuple[Path, ...] = ()
     stars: StarsSettings | None = None
+    environment: EnvironmentSpec | None = None  # replaces ``background`` (then all 0)
 
 
 @dataclass(frozen=True)

@@ -86,6 +86,7 @@ from .description import (
     ObjectSpec,
 )
 from .footprint import check_memory
+from .sky import EnvironmentImage, load_environment
 from .stars import StarField, star_field
 from .worldlines import VelocityGroup
 
@@ -123,6 +124,8 @@ class Scene:
     light_triangles: int = 0
     # the sky's stars (``scene.stars``, core/scene/stars.py), None without any
     stars: StarField | None = None
+    # the environment map (scene.environment, read by sky.load_environment), or None
+    environment: EnvironmentImage | None = None
     # float32 (T, 3, 2): the texture coordinates of each triangle's corners (job-format.md
     # "Textures": (0, 0) the image's bottom-left); zeros where a mesh has none. None only
     # from callers that bring no UVs (then every triangle has zeros)
@@ -385,7 +388,8 @@ def build_scene(job: Job) -> Scene:
     scene = scene_from_parts(triangles, normals, material_ids, materials,
                              [*lights, *job.scene.lights], job.scene.background, camera,
                              file=job.path, named_parts=named, tri_group=tri_group,
-                             groups=tuple(groups), uvs=uvs)
+                             groups=tuple(groups), uvs=uvs,
+                             environment=load_environment(job.scene.environment, job.path))
     if job.scene.stars is not None:
         scene.stars = star_field(job.scene.stars)
     return scene
@@ -413,6 +417,7 @@ def scene_from_parts(
     background: Sequence[float], camera: CameraSettings | None = None, *,
     file: str | Path | None = None, named_parts: Sequence[tuple[str, int]] = (),
     tri_group: np.ndarray | None = None, groups: tuple[VelocityGroup, ...] = (),
+    environment: EnvironmentImage | None = None,
     uvs: np.ndarray | None = None,
 ) -> Scene:
     """A :class:`Scene` from triangle arrays and specs: what :func:`build_scene` does to
@@ -499,6 +504,7 @@ def scene_from_parts(
         tri_group=np.ascontiguousarray(tri_group, np.int32) if groups else None,
         groups=tuple(groups),
         light_triangles=light_triangles,
+        environment=environment,
         uvs=np.ascontiguousarray(uvs, dtype=np.float32),
     )
 

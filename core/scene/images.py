@@ -108,9 +108,23 @@ def read_image(path: Path | str, *, key: str, file: Path | str | None,
     return image
 
 
+def png_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) from a PNG's IHDR chunk, or None for another format. Read before
+    OpenImageIO opens the file: libpng prints its own error line for a 0×0 header."""
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
 def _read_pixels(path: Path, key: str, file: Path | str | None, encoding: Encoding
                  ) -> np.ndarray:
     """float32 (H, W, C ≤ 4), bottom row first, decoded as ``encoding`` says."""
+    size = png_size(path)
+    if size is not None and 0 in size:
+        raise UserError(f"{path}: the image is empty ({size[0]}×{size[1]})", key=key,
+                        file=file)
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # colour as stored, not × alpha
     inp = oiio.ImageInput.open(str(path), config)

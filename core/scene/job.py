@@ -40,6 +40,10 @@ Rules across keys (checked here, by hand)
 - **Objects**: ``material`` names a defined material; ``velocity`` is accepted
   (|v| < 1) but must be zero for now; mesh files exist; ``smooth`` is not for glTF.
 - **Lights**: an area light's ``up`` is not parallel to its ``direction``.
+- **Environment**: ``scene.environment`` replaces ``scene.background``, so a non-zero
+  background beside it is an error (key ``scene.background``) rather than one of the two
+  skies being dropped silently; its ``file`` (relative to the job) must be readable here,
+  and is read as an image when the scene is built (:mod:`.sky`).
 - **Include**: ``scene.include = "other.toml"`` (or a list of files), relative to this
   job. Each included file is validated as a complete job (its paths are relative to
   itself, it may include further files, cycles are errors, it may not name a
@@ -73,6 +77,7 @@ from .description import (
     IMAGE_SUFFIXES,
     TEXTURE_SLOTS,
     CameraSettings,
+    EnvironmentSpec,
     Job,
     LightSpec,
     MaterialSpec,
@@ -610,6 +615,9 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         if inc.scene.stars is not None:
             raise sctx.error("include", f"{inc_path} sets scene.stars; only the including "
                              "job may set the sky's stars")
+        if inc.scene.environment is not None:
+            raise sctx.error("include", f"{inc_path} sets scene.environment; only the "
+                             "including job may set the sky's environment map")
         for m in inc.scene.materials:
             if m.name in origin:
                 raise sctx.error("include", f"material '{m.name}' of {inc_path} is already "
@@ -645,6 +653,7 @@ def _scene(spec: schema.JobFile, ctx: _Ctx, stack: tuple[Path, ...]) -> SceneSpe
         lights=tuple(lights),
         includes=tuple(includes),
         stars=_stars(s.stars),
+        environment=_environment(s, sctx, job_dir),
     )
 
 
@@ -654,6 +663,23 @@ def _stars(st: schema.Stars | None) -> StarsSettings | None:
         return None
     return StarsSettings(catalog=st.catalog, magnitude_limit=float(st.magnitude_limit),
                          brightness=float(st.brightness))
+
+
+def _environment(s: schema.Scene, ctx: _Ctx, job_dir: Path) -> EnvironmentSpec | None:
+    """``scene.environment``: the map's file resolved and readable. It replaces the
+    background: a non-zero ``background`` beside it is refused (one sky, never a silent
+    choice between two)."""
+    if s.environment is None:
+        return None
+    if any(c > 0.0 for c in s.background):
+        raise ctx.error("background", "scene.environment replaces the background: give "
+                        "one of them (background = [0, 0, 0] or no environment)")
+    env = s.environment
+    ectx = ctx.sub("environment")
+    path = _resolve_path(env.file, job_dir, ectx, "file")
+    check_readable(path, ectx.key("file"), ectx.file)
+    return EnvironmentSpec(file=path, strength=float(env.strength),
+                           rotation_z=float(env.rotation_z))
 
 
 # -------------------------------------------------------------------- entry points
@@ -896,6 +922,10 @@ def job_summary(job: Job) -> str:
         st = s.stars
         lines.append(f"  stars     {star_count(st)} of the {st.catalog} catalogue to magnitude "
                      f"{st.magnitude_limit:g}, brightness {st.brightness:g}")
+    if s.environment is not None:
+        e = s.environment
+        lines.append(f"  environment {e.file}, strength {e.strength:g}, rotation_z "
+                     f"{e.rotation_z:g} deg")
     for inc in s.includes:
         lines.append(f"  include   {inc}")
     index, groups, _ = worldlines.rest_frame_offsets(list(s.objects))

@@ -508,12 +508,30 @@ class Stars(Table):
                          "luminous flux of 2.5e-4 sr of luminance-1 sky (physics.md).")
 
 
+class Environment(Table):
+    """``scene.environment``: an equirectangular environment map (lab radiance)."""
+
+    what: ClassVar[str] = "in scene.environment"
+    needs: ClassVar[str] = "an environment needs its image file"
+    file: Annotated[Str, AfterValidator(_nonblank)] = Field(
+        description="Equirectangular (lat-long) image, relative to the job: EXR/HDR linear, "
+                    "PNG/JPEG/TIFF sRGB-encoded; texels are linear Rec.709 radiance. Top row "
+                    "+Z, column u along azimuth pi - 2 pi u from +X towards +Y (Blender's "
+                    "Environment Texture).")
+    strength: NonNegative = Field(1.0, description="Radiance scale.")
+    rotation_z: Number = Field(0.0, description="Degrees: turns the map about +Z (adds to "
+                                                "the azimuth).")
+
+
 class Scene(Table):
     """``[scene]``: a glTF file, the sky, included job files."""
 
     file: Str = Field("", description="glTF 2.0 file (.glb / .gltf), relative to the job; "
                                       "objects below are added to it.")
-    background: Colour = Field([0.0, 0.0, 0.0], description="RGB radiance of the sky.")
+    background: Colour = Field([0.0, 0.0, 0.0], description="RGB radiance of the sky "
+                                                            "(0 with an environment).")
+    environment: Environment = Field(None, description="An environment map: replaces the "
+                                                       "background.")
     include: Annotated[list[Str], Field(min_length=1),
                        BeforeValidator(_str_to_list,
                                        json_schema_input_type=Str | list[Str]),
@@ -1235,7 +1253,8 @@ def markdown() -> str:
         ("[motion]", Motion, ()), ("motion.keyframes entries", Keyframe, ()),
         ("motion.events entries", CameraEvent, ()),
         ("output.view_transform", ViewTransformTable, ()),
-        ("[scene]", Scene, ()), ("scene.stars", Stars, ()), ("[[materials]]", Material, ()),
+        ("[scene]", Scene, ()), ("scene.environment", Environment, ()),
+        ("scene.stars", Stars, ()), ("[[materials]]", Material, ()),
         ("materials.emission_spectrum", Spectrum, ()),
         ("[[objects]], every shape", Object, ()),
     ]
@@ -1285,7 +1304,12 @@ RULES = (
     "scene files exist and have a known suffix; `smooth` is not for glTF meshes.",
     "`lights`: an area light's `up` is not parallel to its `direction`.",
     "`scene`: `scene.file` or at least one `[[objects]]` entry; included files are "
-    "complete jobs without `scene.file` and without `scene.stars`, without cycles.",
+    "complete jobs without `scene.file`, `scene.stars` or `scene.environment`, without "
+    "cycles.",
+    "`scene.environment` replaces `scene.background`: a non-zero background beside it is "
+    "an error; its file must be readable when the job is read, and an image OpenImageIO "
+    "reads, not empty, with finite values, when the scene is built (before anything is "
+    "written).",
 )
 
 

@@ -1,0 +1,281 @@
+"""Environment maps: lab radiance at infinity from an equirectangular image.
+
+Directions (lab frame, job-format.md "Skies", as Blender's Environment Texture): the unit
+vector ω = (sin θ cos φ, sin θ sin φ, cos θ), θ from +Z, φ from +X towards +Y, looks at
+the map coordinates
+
+    u = (π + ρ − φ) / 2π  (mod 1),    v = 1 − θ/π            (ρ = rotation_z)
+
+and back φ = π + ρ − 2πu, θ = π(1 − v): the centre column (u = ½) looks along +X when
+ρ = 0, u = ¼ along +Y, the top row (v = 1) up +Z. The image's row 0 is its bottom row
+(v = 0, :func:`..scene.images.read_image`). Texel (r, c) of an H × W map covers
+v ∈ [r/H, (r+1)/H], u ∈ [c/W, (c+1)/W]; a direction sees the texel it falls in
+(nearest lookup, Blender's "Closest" interpolation): radiance is piecewise constant,
+exactly the density the sampler draws from (below). Where no light sampling competes
+— camera rays, and rays after a delta (mirror, glass) bounce, whose MIS weight is 1 —
+the map is interpolated bilinearly between texel centres instead (Blender's "Linear"),
+so a map seen directly or in a mirror shows no texel blocks; that path's estimate is
+unbiased for either lookup, and the light a diffuse or glossy surface receives is the
+nearest map's, which its two techniques (NEE and BSDF sampling) agree on.
+
+Radiance (lab frame): a texel of linear Rec.709 value rgb (× ``strength``; negative
+components clamped to 0) is an RGB emitter (physics.md, "Spectral model"):
+
+    L(λ) = k · s(λ; c) · E(λ),   k = 2 max(rgb),  c = rgb_table.coefficients(rgb / k),
+
+E = D65_ext (cie1931). The seed-gaussian mode's RGB emitter is flat, L = mean(rgb): there
+c = 0 (s = ½), k = 2 mean(rgb), E = 1. In the rgb mode a lane is the texel's channel.
+Per texel the kernels read (c0, c1, c2, k) (or (r, g, b, 1)), E is a row of the
+emission table looked up at the lane's lab column (:data:`KernelEnvironment.row`).
+An escaping ray's lanes are lab wavelengths, so the camera sees D⁵ L_lab(D λ), the
+aberration coming from the lab direction.
+
+Importance sampling (next-event estimation): piecewise constant over texels, the
+probability of texel t proportional to its power, Y_t ΔΩ_t (Y the Rec.709 luminance of
+its rgb, ΔΩ_t = (2π/W)(cos θ_top − cos θ_bottom) its solid angle): a row from the
+marginal CDF over rows, a column from that row's conditional CDF, (u, v) uniform inside
+the texel. The density per unit (u, v) is p_t·H·W and dΩ = 2π² sin θ du dv, so
+
+    pdf(ω) = p_t · H · W / (2π² sin θ).
+
+Robustness: a texel with non-zero radiance has Y > 0 (rgb ≥ 0, not all 0) and ΔΩ > 0,
+so its probability is positive: with the nearest lookup the sampler covers every
+direction the map lights, which MIS needs to stay unbiased (no uniform mix is needed;
+a bilinear lookup would need one, since it spreads a texel's light into neighbours of
+weight 0). A map that is black everywhere is no light (power 0).
+
+:data:`NEE` (internal switch for ``bench/environment.py``, not a job key): False leaves
+the map out of the light table, so it is reached by BSDF sampling only.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..physics import spectrum
+from ..physics.rgb_table import coefficients, lambda_of_column, sigmoid_reflectance
+from ..scene.sky import EnvironmentImage
+
+#: Next-event estimation samples the map (False: BSDF sampling only; benchmarks).
+NEE = True
+LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance weights
+TWO_PI_SQ = 2.0 * math.pi * math.pi
+
+
+class KernelEnvironment(NamedTuple):
+    """What the kernels read of a map (:func:`kernel_environment`)."""
+
+    on: bool
+    tex: np.ndarray    # float32 (H, W, 4): (c0, c1, c2, k), rgb mode (r, g, b, 1)
+    marg: np.ndarray   # float64 (H + 1,): CDF over rows
+    cond: np.ndarray   # float64 (H, W + 1): CDF over the columns of each row
+    pmf: np.ndarray    # float32 (H, W): probability of each texel
+    rot: float         # rotation_z in radians
+    row: int           # the emission-table row of E(λ) (rgb: ones)
+
+
+def texel_rgb(image: EnvironmentImage) -> np.ndarray:
+    """The map's linear Rec.709 radiance per texel, float64 (H, W, 3), × strength,
+    negative components clamped to 0 (a grey image gives its value on all three)."""
+    px = np.asarray(image.pixels, np.float64)
+    rgb = px[..., :3] if px.shape[2] >= 3 else np.repeat(px[..., :1], 3, axis=2)
+    return np.clip(rgb, 0.0, None) * image.strength
+
+
+def solid_angles(height: int, width: int) -> np.ndarray:
+    """ΔΩ of a texel of each row (H,), row 0 at the bottom: (2π/W)(cos θ_top − cos θ_bot)
+    with θ = π(1 − v)."""
+    v = np.arange(height + 1) / height
+    cos_t = np.cos(math.pi * (1.0 - v))  # row r spans cos θ from cos_t[r] to cos_t[r + 1]
+    return (2.0 * math.pi / width) * (cos_t[1:] - cos_t[:-1])
+
+
+def texel_power(rgb: np.ndarray) -> np.ndarray:
+    """Y_t ΔΩ_t per texel (H, W): the sampling weights and the map's power."""
+    h, w = rgb.shape[:2]
+    return (rgb @ LUMA) * solid_angles(h, w)[:, None]
+
+
+def distribution(power: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(marginal CDF over rows (H+1,), conditional CDFs (H, W+1), texel pmf (H, W)) of
+    the piecewise-constant density ∝ ``power``; all zeros stay a valid (unused) table."""
+    h, w = power.shape
+    total = float(power.sum())
+    rows = power.sum(axis=1)
+    marg = np.zeros(h + 1)
+    cond = np.zeros((h, w + 1))
+    if total <= 0.0:
+        marg[1:] = np.arange(1, h + 1) / h
+        cond[:, 1:] = np.arange(1, w + 1) / w
+        return marg, cond, np.zeros((h, w), np.float32)
+    marg[1:] = np.cumsum(rows) / total
+    marg[-1] = 1.0
+    safe = np.where(rows > 0.0, rows, 1.0)
+    cond[:, 1:] = np.cumsum(power, axis=1) / safe[:, None]
+    cond[rows <= 0.0, 1:] = np.arange(1, w + 1) / w  # never chosen: any valid CDF
+    cond[:, -1] = 1.0
+    return marg, cond, (power / total).astype(np.float32)
+
+
+def texel_table(rgb: np.ndarray, mode: str) -> np.ndarray:
+    """(c0, c1, c2, k) per texel (module docstring), float32 (H, W, 4); rgb mode
+    (r, g, b, 1)."""
+    h, w = rgb.shape[:2]
+    out = np.zeros((h, w, 4), np.float32)
+    if mode == "rgb":
+        out[..., :3] = rgb
+        out[..., 3] = 1.0
+    elif mode == "seed-gaussian":
+        out[..., 3] = 2.0 * rgb.mean(axis=2)
+    else:
+        k = 2.0 * rgb.max(axis=2)
+        out[..., :3] = coefficients(rgb / np.where(k > 0.0, k, 1.0)[..., None])
+        out[..., 3] = k
+    return out
+
+
+def base_row(mode: str) -> np.ndarray:
+    """E(λ) as an emission-table row: D65_ext, the seed's flat emitter, or rgb ones."""
+    if mode == "rgb":
+        return np.ones(3, np.float32)
+    if mode == "seed-gaussian":
+        return spectrum.flat_emission()
+    return spectrum.d65_ext()
+
+
+def power_estimate(image: EnvironmentImage, radius: float) -> float:
+    """The map's power through the scene's bounding sphere, Σ Y_t ΔΩ_t · π r² (as the
+    constant sky's L · 4π · π r²): its share in light selection."""
+    return float(texel_power(texel_rgb(image)).sum()) * math.pi * radius * radius
+
+
+def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> KernelEnvironment:
+    """The kernel tables of ``image`` (None: an unused 1×1 placeholder, ``on`` False);
+    ``row`` is where :func:`base_row` went in the emission table."""
+    if image is None:
+        return KernelEnvironment(False, np.zeros((1, 1, 4), np.float32), np.array([0.0, 1.0]),
+                                 np.array([[0.0, 1.0]]), np.zeros((1, 1), np.float32), 0.0,
+                                 max(row, 0))
+    rgb = texel_rgb(image)
+    marg, cond, pmf = distribution(texel_power(rgb))
+    return KernelEnvironment(True, texel_table(rgb, mode), marg, cond, pmf,
+                             math.radians(image.rotation_z), row)
+
+
+# ------------------------------------------------------------------ device functions
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def direction_to_uv(x, y, z, rot):
+    """Map coordinates (u, v) ∈ [0, 1)² × [0, 1] of the unit lab direction (x, y, z)."""
+    cz = min(max(np.float64(z), -1.0), 1.0)
+    v = 1.0 - math.acos(cz) / math.pi
+    u = (math.pi + rot - math.atan2(np.float64(y), np.float64(x))) / (2.0 * math.pi)
+    return u - math.floor(u), v
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def uv_to_direction(u, v, rot):
+    """The unit lab direction of map coordinates (u, v) and its sin θ."""
+    theta = math.pi * (1.0 - v)
+    phi = math.pi + rot - 2.0 * math.pi * u
+    st = math.sin(theta)
+    return (st * math.cos(phi), st * math.sin(phi), math.cos(theta)), st
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_texel(tex, rot, x, y, z):
+    """(row, column) of the texel the lab direction (x, y, z) sees."""
+    h, w = tex.shape[0], tex.shape[1]
+    u, v = direction_to_uv(x, y, z, rot)
+    return min(int(v * h), h - 1), min(int(u * w), w - 1)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_bilinear(tex, rot, x, y, z):
+    """The 2 × 2 texels around the lab direction (x, y, z) and its weights, for the
+    bilinear lookup of the map seen directly (texel centres at ((c + ½)/W, (r + ½)/H);
+    columns wrap around, rows clamp at the poles): (r0, r1, c0, c1, fy, fx), the value
+    being (1−fy)((1−fx) L[r0,c0] + fx L[r0,c1]) + fy((1−fx) L[r1,c0] + fx L[r1,c1])."""
+    h, w = tex.shape[0], tex.shape[1]
+    u, v = direction_to_uv(x, y, z, rot)
+    cx = u * w - 0.5
+    ry = min(max(v * h - 0.5, 0.0), h - 1.0)
+    c0 = int(math.floor(cx))
+    fx = cx - c0
+    r0 = min(int(ry), h - 1)
+    return r0, min(r0 + 1, h - 1), c0 % w, (c0 + 1) % w, ry - r0, fx
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_lane_bilinear(tex, q, j, rgb, lamu, base):
+    """:func:`env_lane` interpolated over the texels ``q`` of :func:`env_bilinear`."""
+    r0, r1, c0, c1, fy, fx = q
+    a = (1.0 - fx) * env_lane(tex, r0, c0, j, rgb, lamu, base) \
+        + fx * env_lane(tex, r0, c1, j, rgb, lamu, base)
+    b = (1.0 - fx) * env_lane(tex, r1, c0, j, rgb, lamu, base) \
+        + fx * env_lane(tex, r1, c1, j, rgb, lamu, base)
+    return (1.0 - fy) * a + fy * b
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_lane(tex, r, c, j, rgb, lamu, base):
+    """The radiance of texel (r, c) for lane j: rgb mode its channel j, else
+    k · s(λ; c) · E with λ the lane's lab wavelength (table column ``lamu``) and
+    ``base`` = E(λ) (the emission row at lamu)."""
+    if rgb:
+        return np.float64(tex[r, c, j])
+    return (np.float64(tex[r, c, 3]) * base
+            * sigmoid_reflectance(tex[r, c, 0], tex[r, c, 1], tex[r, c, 2],
+                                  lambda_of_column(lamu)))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_pdf(pmf, rot, x, y, z):
+    """Solid-angle density of :func:`env_sample` at the lab direction (x, y, z):
+    p_t H W / (2π² sin θ) (0 at the poles)."""
+    h, w = pmf.shape[0], pmf.shape[1]
+    u, v = direction_to_uv(x, y, z, rot)
+    st = math.sqrt(max(0.0, 1.0 - min(max(np.float64(z), -1.0), 1.0) ** 2))
+    if st <= 0.0:
+        return 0.0
+    return np.float64(pmf[min(int(v * h), h - 1), min(int(u * w), w - 1)]) * h * w / (
+        TWO_PI_SQ * st)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _pick(cdf, u):
+    """(k, fraction) with cdf[k] <= u < cdf[k + 1] and u's place inside it."""
+    n = len(cdf) - 1
+    k = min(max(np.searchsorted(cdf, u, side="right") - 1, 0), n - 1)
+    lo, hi = cdf[k], cdf[k + 1]
+    f = (u - lo) / (hi - lo) if hi > lo else 0.5
+    return k, min(max(f, 0.0), 1.0 - 1e-7)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_sample(marg, cond, pmf, rot, u1, u2):
+    """A lab direction drawn ∝ texel power (module docstring) and its solid-angle pdf
+    (0 when it fell on a pole: then refuse the sample)."""
+    h, w = pmf.shape[0], pmf.shape[1]
+    r, fv = _pick(marg, u1)
+    c, fu = _pick(cond[r], u2)
+    wi, st = uv_to_direction((c + fu) / w, (r + fv) / h, rot)
+    pdf = 0.0
+    if st > 0.0:
+        pdf = np.float64(pmf[r, c]) * h * w / (TWO_PI_SQ * st)
+    return wi, pdf
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_light_sample(marg, cond, pmf, rot, p_sel, u1, u2):
+    """Next-event estimation towards the map, picked with probability ``p_sel``: the
+    tuple of :func:`.lights.sample_light` (wi, p_sel · pdf, scale 1, not delta, at
+    infinity, no target, accepted when the pdf is positive)."""
+    wi, pdf = env_sample(marg, cond, pmf, rot, u1, u2)
+    p_l = p_sel * pdf
+    return wi, p_l, 1.0, False, False, (0.0, 0.0, 0.0), p_l > 0.0
