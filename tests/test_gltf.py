@@ -691,7 +691,8 @@ def test_material_textures_factors_samplers_and_transform(tmp_path):
             baseColorTexture=g.TextureInfo(index=0, extensions=transform),
             metallicRoughnessTexture=g.TextureInfo(index=0)),
         emissiveFactor=[1.0, 0.5, 0.25], emissiveTexture=g.TextureInfo(index=1),
-        normalTexture=g.NormalMaterialTexture(index=1, scale=0.5))
+        normalTexture=g.NormalMaterialTexture(index=1, scale=0.5), alphaMode="MASK",
+        alphaCutoff=0.3)
     gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
                  meshes=[g.Mesh(primitives=[g.Primitive(attributes=g.Attributes(POSITION=pos),
                                                         indices=idx, material=0)])],
@@ -711,3 +712,4 @@ def test_material_textures_factors_samplers_and_transform(tmp_path):
     assert m.emission_texture.file == tmp_path / "e.png"
     assert m.emission_texture.factor == (1.0, 0.5, 0.25, 1.0) and m.emission_strength == 1.0
     assert m.normal_texture.wrap == ("repeat", "repeat") and m.normal_scale == 0.5
+    assert m.alpha_mode == "mask" and m.alpha_cutoff == pytest.approx(0.3)

@@ -518,3 +518,66 @@ def test_emission_texture_is_an_rgb_emitter(tmp_path):
     m_c, s_c = image_mean_and_sigma(const)
     assert np.all(np.abs(m_t - 2 * rgb) <= 5 * s_t + 0.01 * 2 * rgb), (m_t, 2 * rgb)
     assert np.all(np.abs(m_t - m_c) <= 5 * np.hypot(s_t, s_c) + 0.01 * 2 * rgb), (m_t, m_c)
+
+
+# ------------------------------------------------------------------ alpha cut-outs
+
+
+def mask_job(tmp_path: Path, alpha: list[float], max_depth: int) -> dict:
+    """A black masked quad (base_color_texture: one row of texels of alpha ``alpha``,
+    alpha_mode = "mask", cutoff 0.5) 1 m above a grey floor (ρ = 0.6), the sun straight
+    down, the camera above both looking down: it sees the quad, and the floor through
+    the quad's holes."""
+    img = np.zeros((1, len(alpha), 4), np.float32)
+    img[0, :, 3] = alpha
+    write_image(tmp_path / "mask.exr", img)
+    h = 10.0 * math.tan(math.radians(FOV) / 2)
+    return base_job(render={"width": 16, "height": 16, "spp": 16, "max_depth": max_depth,
+                            "spectral": "rgb"},
+                    camera={"position": [0, 0, 10], "look_at": [0, 0, 0], "up": [0, 1, 0],
+                            "fov": FOV},
+                    materials=[{"name": "mask", "base_color_texture": "mask.exr",
+                                "alpha_mode": "mask", "alpha_cutoff": 0.5,
+                                "roughness": 1.0},
+                               {"name": "floor", "base_color": [0.6, 0.6, 0.6],
+                                "roughness": 1.0}],
+                    objects=[{"shape": "quad", "material": "mask", "corners":
+                              [[-3 * h, -3 * h, 1], [3 * h, -3 * h, 1], [3 * h, 3 * h, 1],
+                               [-3 * h, 3 * h, 1]]},
+                             {"shape": "quad", "material": "floor", "corners":
+                              [[-40, -40, 0], [40, -40, 0], [40, 40, 0], [-40, 40, 0]]}],
+                    lights=[{"type": "sun", "direction": [0, 0, -1], "power": 2.0}])
+
+
+@pytest.mark.parametrize("moving", [False, True])
+def test_rays_and_shadows_pass_the_holes_of_a_mask_without_a_bounce(tmp_path, moving):
+    """All holes: the floor is seen and lit as if the quad were not there, L = ρ E/π,
+    with max_depth 2 (camera -> floor -> sun): passing the hole is not a bounce (else the
+    light sample would be a 3rd segment) and the sun's shadow ray passes it too; also
+    when the masked quad moves (at 0.3 c, in its plane)."""
+    job = mask_job(tmp_path, [0.0, 0.0], 2)
+    if moving:
+        job["objects"][0]["velocity"] = [0.3, 0.0, 0.0]
+    r = render(job, tmp_path)
+    np.testing.assert_allclose(r.rgb, 0.6 * 2 / math.pi, rtol=1e-5)
+    assert np.all(r.image.rgba[..., 3] == 1.0)
+
+
+def test_a_half_mask_shows_the_floor_through_its_holes_only(tmp_path):
+    """Alpha 0 on the quad's left half (u < 1/2 along +x), 1 on its right: the left of the
+    image is the lit floor (ρ E/π), the right the quad's black opaque half (0); the
+    pixels at the edge are mixed."""
+    r = render(mask_job(tmp_path, [0.0, 1.0], 2), tmp_path)
+    y = r.rgb[..., 0]
+    # the view spans a third of the quad around its centre: u = 1/2 at the image centre
+    np.testing.assert_allclose(y[:, :7], 0.6 * 2 / math.pi, rtol=1e-5)
+    np.testing.assert_allclose(y[:, 9:], 0.0, atol=1e-7)
+
+
+def test_alpha_mode_mask_needs_a_base_color_texture(tmp_path):
+    job = base_job(materials=[{"name": "m", "alpha_mode": "mask"}],
+                   objects=[{"shape": "sphere", "center": [0, 5, 0], "radius": 1,
+                             "material": "m"}])
+    with pytest.raises(UserError, match="base_color_texture") as e:
+        render(job, tmp_path)
+    assert e.value.key == "materials[0].alpha_mode"

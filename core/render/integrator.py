@@ -80,8 +80,8 @@ from numba import njit
 from ..physics import spectrum
 from ..physics.relativity import aberrate_doppler_ray
 from ..physics.spectrum import INV_DLOG
-from ..scene.geometry import ray_offset, ray_offset_at
-from .accel import MISS_DISTANCE, Accel
+from ..scene.geometry import RAY_OFFSET_POINT, ray_offset, ray_offset_at
+from .accel import MISS_DISTANCE, Accel, Hits
 from .bsdf import (
     has_smooth_lobe,
     lane_value,
@@ -131,6 +131,7 @@ from .textures import (
     bounce_spread,
     channel,
     hit_lod,
+    holes,
     no_textures,
     normal_mapped,
     slot_texel,
@@ -555,7 +556,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
      s_env_row, s_tex) = sc
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
      t_mat_flag, t_nscale, t_estr, t_trans, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65,
-     t_rgb, t_on) = s_tex
+     t_rgb, t_on, _, _) = s_tex
     f_pend, f_thr, f_alb, f_nrm = feats
     (keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu, prev_moving,
      cone) = paths
@@ -1042,6 +1043,59 @@ def wavefront_buffers(n: int, keep: dict | None = None,
     return {name: keep[name][:n] for name, _, _ in specs}
 
 
+#: Most holes (alpha-masked texels) a ray passes in one segment; beyond, it stops there.
+MAX_HOLES = 64
+
+
+def see_through(sc: KernelScene, accel: Accel | MovingScene, o: np.ndarray, d: np.ndarray,
+                t0: np.ndarray, hits: Hits, tmax: np.ndarray | None) -> Hits:
+    """``hits`` with every hit on a hole of an alpha-masked material replaced by the next
+    hit beyond it (:func:`.textures.holes`; up to ``MAX_HOLES`` per ray): the ray goes on
+    from just past the hole (the ray offset ε of :func:`..scene.geometry.ray_offset_at`
+    beyond it, same direction; on a moving scene ``t0`` minus that lab distance), which is
+    not a bounce. t stays the distance from the ray's own origin. ``tmax`` (static
+    scenes): the rays' lengths (shadow rays), a miss then keeps t = tmax."""
+    t, prim = hits.t.copy(), hits.prim.copy()
+    u, v = hits.u.copy(), hits.v.copy()
+    seg = None if hits.seg is None else hits.seg.copy()
+    moving = isinstance(accel, MovingScene)
+    mask = np.empty(len(prim), bool)
+    for _ in range(MAX_HOLES):
+        holes(sc.tex, sc.tri_mat, prim, u, v, mask)
+        idx = np.flatnonzero(mask)
+        if len(idx) == 0:
+            break
+        p = o[idx] + t[idx, None] * d[idx]
+        adv = t[idx] + sc.eps + RAY_OFFSET_POINT * np.abs(p).max(axis=1)
+        o2 = (o[idx] + adv[:, None] * d[idx]).astype(np.float32)
+        d2 = np.ascontiguousarray(d[idx])
+        if moving:
+            h2 = accel.intersect(o2, d2, t0[idx] - adv, {})
+        else:
+            h2 = accel.intersect(o2, d2, None if tmax is None else
+                                 np.maximum(tmax[idx] - adv, 0.0).astype(np.float32))
+        hit = h2.prim >= 0
+        t[idx] = np.where(hit, adv + h2.t, h2.t if tmax is not None and not moving
+                          else MISS_DISTANCE)
+        prim[idx], u[idx], v[idx] = h2.prim, h2.u, h2.v
+        if seg is not None:
+            seg[idx] = h2.seg if moving else -1
+    return Hits(t, prim, u, v, seg)
+
+
+def occluded_through(sc: KernelScene, accel: Accel | MovingScene, o: np.ndarray,
+                     d: np.ndarray, tmax: np.ndarray, t0: np.ndarray) -> np.ndarray:
+    """Whether each shadow ray (length ``tmax``) is blocked by anything but holes of
+    alpha-masked materials (:func:`see_through`): a nearest-hit query per layer instead
+    of Embree's any-hit occlusion, only in scenes with masked materials."""
+    if isinstance(accel, MovingScene):
+        hits = accel.intersect(o, d, t0, {})
+        hits = see_through(sc, accel, o, d, t0, hits, None)
+        return (hits.prim >= 0) & (hits.t < tmax)
+    hits = accel.intersect(o, d, tmax)._replace(seg=None)
+    return see_through(sc, accel, o, d, t0, hits, tmax).prim >= 0
+
+
 def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
           sky_seen: bool = True, buffers: dict | None = None,
@@ -1098,6 +1152,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
             hits = accel.intersect(rays.o[:m], rays.d[:m], rays.t[:m], b["moving"])
         else:
             hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
+        if sc.tex.cutouts:  # through the holes of alpha-masked materials: no bounce
+            hits = see_through(sc, accel, rays.o[:m], rays.d[:m], rays.t[:m], hits, None)
         if depth == 0:
             first_t, first_seg = hits.t, hits.seg.copy()
         if area_lights:
@@ -1105,7 +1161,10 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
         m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen,
                       feats, features)
         if ns:
-            if moving:
+            if sc.tex.cutouts:  # shadows through the holes too
+                blocked = occluded_through(sc, accel, shadows.o[:ns], shadows.d[:ns],
+                                           shadows.t[:ns], shadows.t0[:ns])
+            elif moving:
                 blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns],
                                          shadows.t0[:ns], b["moving"])
             else:

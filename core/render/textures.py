@@ -101,6 +101,8 @@ class TextureTable(NamedTuple):
     d65_row: int            # the emit table's D65_ext row (emission textures), else -1
     rgb_mode: bool          # spectral = "rgb": texels are used per lane directly
     enabled: bool           # some material has a texture (else the kernels skip the cones)
+    mat_cut: np.ndarray     # float32 (M,): alpha_cutoff of an alpha_mode = "mask" material, -1
+    cutouts: bool           # some material is a mask (the tracer then looks through holes)
 
 
 def wrap_code(mode: str) -> int:
@@ -257,6 +259,9 @@ def build_textures(materials: list[MaterialSpec], tri_uv: np.ndarray | None,
         uv = np.zeros((1, 3, 2), np.float32)
     scale, data = (coefficients if coefficients is not None else
                    (np.ones(1, np.float32), np.zeros((1, 1, 1, 1, 3), np.float32)))
+    mat_cut = np.array([m.alpha_cutoff if m.alpha_mode == "mask"
+                        and m.base_color_texture is not None else -1.0 for m in materials],
+                       np.float32).reshape(-1)
     uv_ir = np.array([[np.nan if m.reflectance_uv is None else m.reflectance_uv,
                        np.nan if m.reflectance_ir is None else m.reflectance_ir]
                       for m in materials], np.float32).reshape(-1, 2)
@@ -268,7 +273,7 @@ def build_textures(materials: list[MaterialSpec], tri_uv: np.ndarray | None,
         np.array([m.transmission for m in materials], np.float32).reshape(-1),
         uv_ir, uv, np.ascontiguousarray(scale, np.float32),
         np.ascontiguousarray(data, np.float32), int(d65_row), mode == "rgb",
-        bool((mat_tex >= 0).any()))
+        bool((mat_tex >= 0).any()), mat_cut, bool((mat_cut >= 0).any()))
 
 
 def pack_atlas(pyramids: list[list[np.ndarray]], wraps: list[tuple[str, str]]
@@ -518,3 +523,25 @@ def texel_emission(r, g, b, cscale, cdata, lamu, pi, j):
         return 0.0
     cell = table_cell(cscale, cdata, r / sc, g / sc, b / sc)
     return sc * cell_reflectance(cdata, cell, lambda_of_column(lamu[pi, j]))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def holes(tt, tri_mat, prim, u, v, out):
+    """out[i] = True where hit i (triangle ``prim[i]``, barycentrics (u[i], v[i])) is on
+    a hole of an alpha-masked material: the alpha of its base-colour texel (times the
+    factor's) below the material's ``alpha_cutoff``. The alpha is read at the finest
+    level (a mask's edges stay sharp; mip levels would blur them into partial coverage),
+    bilinearly."""
+    for i in range(len(prim)):
+        out[i] = False
+        tri = prim[i]
+        if tri < 0:
+            continue
+        m = tri_mat[tri]
+        cut = tt.mat_cut[m]
+        if cut < 0.0:
+            continue
+        uv, _, _ = triangle_uv(tt.tri_uv, tri, np.float64(u[i]), np.float64(v[i]))
+        a = slot_texel(tt.atlas, tt.desc, tt.level_rows, tt.mat_tex, tt.mat_uv,
+                       tt.mat_factor, tt.mat_lod, m, BASE, uv[0], uv[1], -1e30)
+        out[i] = a[3] < cut

@@ -205,6 +205,10 @@ class MaterialSpec:
     ``emission_texture``      :class:`TextureSpec`       --       replaces ``emission``
     ``normal_texture``        :class:`TextureSpec`       --       tangent-space normal map
     ``normal_scale``          float                      1.0      glTF normalTexture.scale
+    ``alpha_mode``            "opaque" or "mask"         opaque   mask: base_color_texture's
+                                                                  alpha below ``alpha_cutoff``
+                                                                  is a hole (glTF MASK)
+    ``alpha_cutoff``          float in [0, 1]            0.5
     ========================  =========================  =======  ===============================
 
     At most one of ``emission_blackbody``, ``emission_line`` and ``emission_spectrum``.
@@ -230,6 +234,8 @@ class MaterialSpec:
     emission_texture: TextureSpec | None = None
     normal_texture: TextureSpec | None = None
     normal_scale: float = 1.0
+    alpha_mode: str = "opaque"
+    alpha_cutoff: float = 0.5
 
     def textures(self) -> tuple[TextureSpec | None, ...]:
         """The texture slots in the kernel's order (:data:`TEXTURE_SLOTS`)."""

@@ -3,7 +3,7 @@
 The reader works on the raw JSON and binary chunks (the GLB container is a
 12-byte header and two chunks), so every glTF extension is directly at hand and a
 truncated or corrupt file gives one :class:`~relray.core.errors.UserError` naming
-``scene.file`` (or the mesh object's ``file`` key). Textures, skins, morph targets
+``scene.file`` (or the mesh object's ``file`` key). Skins, morph targets
 and animations are ignored; Draco and meshopt compression are refused.
 
 What is read, and into what
@@ -19,6 +19,10 @@ mesh primitives (TRIANGLES, STRIP, FAN)    triangles, through the node hierarchy
                                            face normals where a primitive has none
 ``TEXCOORD_0``                             UVs, v -> 1 - v (Blender's bottom-left origin,
                                            as Blender's importer); 0 where absent
+material textures (baseColor, metallic-    ``*_texture`` (:class:`TextureSpec`): samplers'
+Roughness, emissive, normal), KHR_texture_ wrap modes, the transform, images by URI,
+transform, ``alphaMode`` MASK              bufferView or data: URI; factors multiply;
+                                           ``alpha_mode = "mask"``, ``alpha_cutoff``
 ``baseColorFactor`` (linear)               ``base_color`` (alpha ignored); default 1 1 1
 ``metallicFactor``, ``roughnessFactor``    ``metallic``, ``roughness``; default 1, 1
 ``emissiveFactor``                         ``emission``
@@ -655,9 +659,14 @@ def _material(doc_mat: dict[str, Any], index: int,
         if isinstance(normal, dict):
             tex["normal_scale"] = _factor(normal.get("scale"), [1.0],
                                           f"{where}.normalTexture.scale", -1e15, 1e15)[0]
-        if doc_mat.get("alphaMode", "OPAQUE") != "OPAQUE":
-            log.warning("glTF %s: alphaMode %s is not supported (the surface is opaque)",
-                        where, doc_mat.get("alphaMode"))
+        mode = doc_mat.get("alphaMode", "OPAQUE")
+        if mode == "MASK" and tex["base_color_texture"] is not None:
+            tex["alpha_mode"] = "mask"
+            tex["alpha_cutoff"] = _factor(doc_mat.get("alphaCutoff"), [0.5],
+                                          f"{where}.alphaCutoff", 0, None)[0]
+        elif mode != "OPAQUE":
+            log.warning("glTF %s: alphaMode %s is not supported%s (the surface is opaque)",
+                        where, mode, " without a baseColorTexture" if mode == "MASK" else "")
         if "occlusionTexture" in doc_mat:
             log.warning("glTF %s: occlusionTexture is ignored (a path tracer computes "
                         "occlusion)", where)

@@ -416,6 +416,9 @@ def _material(m: schema.Material, ctx: _Ctx, base: Path | None = None) -> Materi
                 "values", "nm and values must have the same length, at least 2")
         spectrum = (nm, values)
     line = m.emission_line
+    if m.alpha_mode == "mask" and m.base_color_texture is None:
+        raise ctx.error("alpha_mode", 'alpha_mode = "mask" cuts holes where the alpha of '
+                        "base_color_texture is below alpha_cutoff: give base_color_texture")
     return MaterialSpec(
         name=m.name,
         base_color=_tuple3(m.base_color),
@@ -431,6 +434,8 @@ def _material(m: schema.Material, ctx: _Ctx, base: Path | None = None) -> Materi
         reflectance_uv=m.reflectance_uv,
         reflectance_ir=m.reflectance_ir,
         one_sided_emission=m.one_sided_emission,
+        alpha_mode=m.alpha_mode,
+        alpha_cutoff=m.alpha_cutoff,
         **_textures(m, ctx, base),
     )
 

@@ -596,6 +596,11 @@ class Material(Table):
                                                   "(0.5, 0.5, 1) is flat).")
     uv_scale: _vec(2, Positive) = Field([1.0, 1.0], description="Multiplies the UVs "
                                         "before every texture lookup (repeats the image).")
+    alpha_mode: _choice(("opaque", "mask")) = Field(
+        "opaque", description='"mask": texels of base_color_texture whose alpha is below '
+                              "alpha_cutoff are holes (rays and shadows pass).")
+    alpha_cutoff: Unit = Field(0.5, description="The alpha below which a texel is a hole "
+                                                '(alpha_mode = "mask").')
 
 
 def _strictly_increasing(v: list[float]) -> list[float]:
