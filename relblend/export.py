@@ -245,6 +245,8 @@ class _Reader:
     blackbody: float | None = None
     #: the image textures read, by slot ("base_color", ...): :meth:`texture`
     textures: dict[str, TextureSpec] = field(default_factory=dict)
+    #: the base colour image's alpha cuts holes (:func:`_alpha_mask`)
+    mask: bool = False
 
     def warn(self, text: str) -> None:
         self.warnings.add(f"{self.label}: {text}")
@@ -399,7 +401,8 @@ def material_spec(mat, warnings: Warnings) -> core_job.MaterialSpec:
     spec = validated(core_job.material_from_dict, _material_values(mat, r), r)
     if not r.textures:
         return spec
-    return replace(spec, **{f"{slot}_texture": tex for slot, tex in r.textures.items()})
+    spec = replace(spec, **{f"{slot}_texture": tex for slot, tex in r.textures.items()})
+    return replace(spec, alpha_mode="mask", alpha_cutoff=ALPHA_CUTOFF) if r.mask else spec
 
 
 def validated(parse: Callable[..., Any], table: dict[str, Any], r: _Reader) -> Any:
@@ -455,12 +458,12 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
                                                      "Transmission"), 0.0)
         if transmission > 0.0 and roughness > 0.0:
             r.warn("rough glass is rendered smooth (the glass lobe ignores roughness)")
-        if r.value(surface, "Alpha", 1.0) < 1.0:
-            r.warn("alpha (transparency) is not supported and is ignored")
+        mask = _alpha_mask(surface, r)
         _normal_map(surface, r)
         emission, em_strength = _emission(em_color, strength)
         if "emission" in r.textures:  # the texel (× strength) replaces the colour
             emission, em_strength = (1.0, 1.0, 1.0), max(float(strength), 0.0)
+        r.mask = mask
         return _values(
             name, base,
             roughness=roughness,
@@ -487,6 +490,28 @@ def _material_values(mat, r: _Reader) -> dict[str, Any]:
     r.warn(f"surface shader '{surface.bl_idname}' is not supported: using the viewport "
            "display colour")
     return _values(name, mat.diffuse_color[:3], float(mat.roughness), float(mat.metallic))
+
+
+#: where a cut-out's alpha is cut (Cycles blends partial alpha; glTF's default cutoff)
+ALPHA_CUTOFF = 0.5
+
+
+def _alpha_mask(surface, r: _Reader) -> bool:
+    """Whether the Alpha input is the base colour image's alpha: then the material is a
+    cut-out (the core's ``alpha_mode = "mask"``, at :data:`ALPHA_CUTOFF`)."""
+    sock = surface.inputs.get("Alpha")
+    src = _linked_node(sock) if sock is not None else None
+    base = r.textures.get("base_color")
+    if src is not None and src.type == "TEX_IMAGE" and base is not None \
+            and _from_socket_index(sock) == 1 and src.image is not None \
+            and image_file(src.image, None) == base.file:
+        r.warn(f"alpha is rendered as a cut-out at {ALPHA_CUTOFF} (Cycles blends partial "
+               "alpha)")
+        return True
+    if src is not None or (sock is not None and float(sock.default_value) < 1.0):
+        r.warn("alpha (transparency) is supported only as the base colour image's alpha "
+               "(a cut-out) and is ignored")
+    return False
 
 
 def _normal_map(surface, r: _Reader) -> None:

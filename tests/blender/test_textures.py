@@ -180,3 +180,42 @@ def test_texture_export_uvs_mapping_channels_and_the_farm(engine, tmp_path):
     rgba, _ = core_render(out / "job.toml", 1)
     diff = np.abs(rgba[..., :3] - in_blender[..., :3]).mean() / in_blender[..., :3].mean()
     assert diff < 0.03, diff
+
+
+def test_the_base_images_alpha_is_a_cut_out_as_in_cycles(engine, tmp_path):
+    """Alpha from the base colour image: the core's alpha mask; the holes are where
+    Cycles shows them (a fully transparent left half: nothing of the quad there)."""
+    if not rendering.engine_available("CYCLES"):
+        pytest.fail("Cycles is not available in this Blender")
+    px = np.ones((32, 32, 4))
+    px[..., :3] = (0.9, 0.5, 0.1)
+    px[:, :16, 3] = 0.0  # the left half is a hole
+    path = tmp_path / "holes.png"
+    out = oiio.ImageOutput.create(str(path))
+    spec = oiio.ImageSpec(32, 32, 4, oiio.UINT8)
+    spec.attribute("oiio:UnassociatedAlpha", 1)
+    out.open(str(path), spec)
+    out.write_image(np.round(px * 255).astype(np.uint8))
+    out.close()
+    scene = textured_quad_scene(path)
+    mat = bpy.data.materials["checker"]
+    tex = next(n for n in mat.node_tree.nodes if n.type == "TEX_IMAGE")
+    mat.node_tree.links.new(tex.outputs["Alpha"],
+                            mat.node_tree.nodes["Principled BSDF"].inputs["Alpha"])
+    export = ext_module("relblend.export")
+    ex = export.export_scene(bpy.context.evaluated_depsgraph_get())
+    spec_m = next(m for m in ex.scene.materials if m.name == "checker")
+    assert spec_m.alpha_mode == "mask" and spec_m.alpha_cutoff == 0.5
+    rendering.set_output(scene, tmp_path, "cyc_", "OPEN_EXR")
+    ours = render_rgb(scene, "RELRAY", engine)
+    cycles = render_rgb(scene, "CYCLES", engine)
+    lit_ours, lit_cycles = ours.sum(axis=2) > 0.05, cycles.sum(axis=2) > 0.05
+    assert 0.2 < lit_cycles.mean() < 0.6  # half the quad is left
+    # away from the edges (Cycles blends the alpha a texel wide, relray cuts at 0.5;
+    # pixel filters differ), the same pixels are lit
+    inner = np.ones_like(lit_cycles)
+    for dy in range(-2, 3):
+        for dx in range(-2, 3):
+            inner &= np.roll(np.roll(lit_cycles, dy, 0), dx, 1) == lit_cycles
+    assert inner.mean() > 0.5
+    assert (lit_ours == lit_cycles)[inner].mean() > 0.99, (lit_ours == lit_cycles)[inner].mean()
