@@ -223,11 +223,30 @@ def test_built_in_shapes_uv_convention_marker_lands_at_its_pixel(tmp_path, shape
     assert math.dist(got, want) < 1.0, (got, want)
 
 
+def textured_quad_glb(path: Path, pos: np.ndarray, uv: np.ndarray, image: str,
+                      material) -> None:
+    """A glb of one quad (glTF positions ``pos``, TEXCOORD_0 ``uv``) with ``material``,
+    whose texture 0 is the image file ``image`` beside it."""
+    import pygltflib as g
+    from test_gltf import QUAD_IDX, GlbBuilder
+
+    b = GlbBuilder()
+    pa = b.add(pos, g.FLOAT, g.VEC3)
+    ta = b.add(uv, g.FLOAT, g.VEC2)
+    ia = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
+    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
+                 meshes=[g.Mesh(primitives=[g.Primitive(
+                     attributes=g.Attributes(POSITION=pa, TEXCOORD_0=ta), indices=ia,
+                     material=0)])],
+                 materials=[material], textures=[g.Texture(source=0)],
+                 images=[g.Image(uri=image)])
+    b.finish(gl, path)
+
+
 def test_gltf_uv_convention_marker_lands_at_its_pixel(tmp_path):
     """A glTF quad with TEXCOORD_0 (top-left origin) and an emissive texture: the marker
     is where glTF's UVs put it (v flipped on import, so the picture is upright)."""
     import pygltflib as g
-    from test_gltf import QUAD_IDX, GlbBuilder
 
     # glTF positions are Y-up: (x, y, z)_gltf -> (x, -z, y); a quad at relray y = 6
     pos = np.array([[-1, -1, -6], [1, -1, -6], [1, 1, -6], [-1, 1, -6]], np.float32)
@@ -235,20 +254,9 @@ def test_gltf_uv_convention_marker_lands_at_its_pixel(tmp_path):
     img = np.zeros((8, 8, 3), np.float32)
     img[6, 1] = 1.0  # column 1, row 6 from the bottom: near the top-left
     write_image(tmp_path / "m.png", img, "uint8")
-    b = GlbBuilder()
-    pa = b.add(pos, g.FLOAT, g.VEC3)
-    ta = b.add(uv_gl, g.FLOAT, g.VEC2)
-    ia = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
-    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
-                 meshes=[g.Mesh(primitives=[g.Primitive(
-                     attributes=g.Attributes(POSITION=pa, TEXCOORD_0=ta), indices=ia,
-                     material=0)])],
-                 materials=[g.Material(emissiveFactor=[1.0, 1.0, 1.0],
-                                       emissiveTexture=g.TextureInfo(index=0),
-                                       pbrMetallicRoughness=g.PbrMetallicRoughness(
-                                           baseColorFactor=[0, 0, 0, 1]))],
-                 textures=[g.Texture(source=0)], images=[g.Image(uri="m.png")])
-    b.finish(gl, tmp_path / "q.glb")
+    textured_quad_glb(tmp_path / "q.glb", pos, uv_gl, "m.png", g.Material(
+        emissiveFactor=[1.0, 1.0, 1.0], emissiveTexture=g.TextureInfo(index=0),
+        pbrMetallicRoughness=g.PbrMetallicRoughness(baseColorFactor=[0, 0, 0, 1])))
     job = base_job(render={"width": W, "height": H, "spp": 4, "max_depth": 1,
                            "spectral": "rgb"}, camera={"fov": FOV},
                    scene={"file": "q.glb", "background": [0, 0, 0]})
@@ -463,7 +471,6 @@ def test_gltf_base_color_texture_times_its_factor(tmp_path):
     linear ρ) is multiplied by baseColorFactor 0.5 (glTF: the factor multiplies the
     texture), lit by the sun along its normal: L = 0.5 ρ E/π (rgb mode: exact)."""
     import pygltflib as g
-    from test_gltf import QUAD_IDX, GlbBuilder
 
     h = 10.0 * math.tan(math.radians(FOV) / 2)
     # relray z = 0 is glTF's y = 0 (Y-up: (x, y, z)_glTF -> (x, -z, y))
@@ -472,19 +479,10 @@ def test_gltf_base_color_texture_times_its_factor(tmp_path):
     srgb = 0.7
     write_image(tmp_path / "c.png", np.full((4, 4, 3), srgb, np.float32), "uint8")
     rho = ((round(srgb * 255) / 255 + 0.055) / 1.055) ** 2.4  # sRGB decoding
-    b = GlbBuilder()
-    pa = b.add(pos, g.FLOAT, g.VEC3)
-    ta = b.add(uv, g.FLOAT, g.VEC2)
-    ia = b.add(QUAD_IDX, g.UNSIGNED_SHORT, g.SCALAR)
-    gl = g.GLTF2(scene=0, scenes=[g.Scene(nodes=[0])], nodes=[g.Node(mesh=0)],
-                 meshes=[g.Mesh(primitives=[g.Primitive(
-                     attributes=g.Attributes(POSITION=pa, TEXCOORD_0=ta), indices=ia,
-                     material=0)])],
-                 materials=[g.Material(pbrMetallicRoughness=g.PbrMetallicRoughness(
-                     baseColorFactor=[0.5, 0.5, 0.5, 1.0], metallicFactor=0.0,
-                     roughnessFactor=1.0, baseColorTexture=g.TextureInfo(index=0)))],
-                 textures=[g.Texture(source=0)], images=[g.Image(uri="c.png")])
-    b.finish(gl, tmp_path / "q.glb")
+    textured_quad_glb(tmp_path / "q.glb", pos, uv, "c.png", g.Material(
+        pbrMetallicRoughness=g.PbrMetallicRoughness(
+            baseColorFactor=[0.5, 0.5, 0.5, 1.0], metallicFactor=0.0, roughnessFactor=1.0,
+            baseColorTexture=g.TextureInfo(index=0))))
     job = lit_quad_job(tmp_path, {"base_color": [0, 0, 0]})
     job["objects"] = []
     job["materials"] = []
