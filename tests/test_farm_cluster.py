@@ -7,6 +7,7 @@ Every server here listens on 127.0.0.1 at a free port and is torn down in a fixt
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -84,11 +85,13 @@ def dask_cluster(tmp_path):
 def small_flyby(folder: Path) -> Path:
     """presets/flyby.toml at 48×36 px, 2 spp (the same worldline and scene)."""
     text = (ROOT / "presets" / "flyby.toml").read_text()
-    text = (text.replace("width = 192", "width = 48").replace("height = 144", "height = 36")
-            .replace("spp = 16", "spp = 2")
-            .replace('dir = "../out/flyby"', 'dir = "out"')
+    for key, value in (("width", 48), ("height", 36), ("spp", 2)):
+        text, n = re.subn(rf"(?m)^{key} = \d+$", f"{key} = {value}", text, count=1)
+        assert n == 1, key
+    text = (text.replace('dir = "../out/flyby"', 'dir = "out"')
             .replace('include = "cornell.toml"',
-                     f'include = "{(ROOT / "presets" / "cornell.toml").as_posix()}"'))
+                     f'include = "{(ROOT / "presets" / "cornell.toml").as_posix()}"')
+            .replace('"textures/', f'"{(ROOT / "presets" / "textures").as_posix()}/'))
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "flyby.toml").write_text(text)
     return folder / "flyby.toml"
