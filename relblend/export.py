@@ -78,6 +78,7 @@ from ..core.scene.description import (
     frozen,
 )
 from ..core.scene.geometry import Scene, scene_from_parts
+from ..core.scene.images import srgb_to_linear
 from ..core.scene.sky import load_environment
 from ..core.scene.stars import star_field
 from ..core.scene.worldlines import rest_frame_offsets
@@ -214,12 +215,6 @@ def _linked_node(socket):
             continue
         return node
     return None
-
-
-def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    """The sRGB EOTF (IEC 61966-2-1)."""
-    v = np.asarray(v, np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
 def image_mean_color(image) -> np.ndarray | None:

@@ -574,13 +574,8 @@ class GltfTextures:
     def texture_index(self, tex) -> int:
         key = (str(tex.file), tuple(tex.wrap))
         if key not in self._index:
-            folder = self.out / "textures"
-            folder.mkdir(exist_ok=True)
-            target = folder / _safe_name(Path(tex.file).name)
-            if Path(tex.file).resolve() != target.resolve():
-                shutil.copyfile(tex.file, target)
             images = self.doc.setdefault("images", [])
-            images.append({"uri": f"textures/{target.name}"})
+            images.append({"uri": copy_image(tex.file, self.out)})
             samplers = self.doc.setdefault("samplers", [])
             samplers.append({"wrapS": GLTF_WRAP[tex.wrap[0]], "wrapT": GLTF_WRAP[tex.wrap[1]]})
             textures = self.doc.setdefault("textures", [])
@@ -616,13 +611,19 @@ def _safe_name(name: str) -> str:
 def farm_environment(env, out: Path) -> dict[str, Any]:
     """The job's ``scene.environment``: the map copied into ``out``/textures (the farm
     folder travels whole), its strength and rotation."""
+    return {"file": copy_image(env.file, out), "strength": float(env.strength),
+            "rotation_z": float(env.rotation_z)}
+
+
+def copy_image(file: Path, out: Path) -> str:
+    """``file`` copied into ``out``/textures (the farm folder travels whole); its path
+    relative to ``out``."""
     folder = out / "textures"
     folder.mkdir(exist_ok=True)
-    target = folder / _safe_name(Path(env.file).name)
-    if Path(env.file).resolve() != target.resolve():
-        shutil.copyfile(env.file, target)
-    return {"file": f"textures/{target.name}", "strength": float(env.strength),
-            "rotation_z": float(env.rotation_z)}
+    target = folder / _safe_name(Path(file).name)
+    if Path(file).resolve() != target.resolve():
+        shutil.copyfile(file, target)
+    return f"textures/{target.name}"
 
 
 def export_farm(context, directory: str | Path, frames: tuple[int, int] | None = None,
