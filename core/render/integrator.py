@@ -199,6 +199,7 @@ class KernelScene(NamedTuple):
     env_pmf: np.ndarray   # float32 (H, W): probability of each texel
     env_rot: float        # rotation_z, radians
     env_row: int          # emission row of E(λ) (D65_ext; rgb mode: ones)
+    env_nm: np.ndarray    # float64 (B,): a spectral map's band wavelengths (else empty)
     tex: TextureTable    # image textures and UVs (:mod:`.textures`; none: ``no_textures``)
 
 
@@ -285,6 +286,7 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
         mat_rgb, bool(env.on), np.ascontiguousarray(env.tex, np.float32),
         np.ascontiguousarray(env.marg, np.float64), np.ascontiguousarray(env.cond, np.float64),
         np.ascontiguousarray(env.pmf, np.float32), float(env.rot), int(env.row),
+        np.ascontiguousarray(env.nm, np.float64),
         no_textures(len(tables.mat_alpha)) if textures is None else textures)
 
 
@@ -553,7 +555,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
      s_beam, _, s_mat_rgb, s_env_on, s_env_tex, s_env_marg, s_env_cond, s_env_pmf, s_env_rot,
-     s_env_row, s_tex) = sc
+     s_env_row, s_env_nm, s_tex) = sc
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
      t_mat_flag, t_nscale, t_estr, t_trans, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65,
      t_rgb, t_on, _, _) = s_tex
@@ -599,13 +601,13 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * env_lane_bilinear(
                             s_env_tex, q_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
                 else:
                     r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * w * env_lane(
                             s_env_tex, r_e, c_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
@@ -811,7 +813,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     lu = lamu[pi, j] + lshift
                     sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
                         * env_lane(s_env_tex, r_e, c_e, j, rgb_lanes, lu,
-                                   lerp_at(s_emit, s_env_row, lu, top))
+                                   lerp_at(s_emit, s_env_row, lu, top), s_env_nm)
                 if moving:
                     so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
                     so, sd, st = shadow_ray_from(so, target, wi, False)

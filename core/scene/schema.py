@@ -515,8 +515,11 @@ class Environment(Table):
     needs: ClassVar[str] = "an environment needs its image file"
     file: Annotated[Str, AfterValidator(_nonblank)] = Field(
         description="Equirectangular (lat-long) image, relative to the job: EXR/HDR linear, "
-                    "PNG/JPEG/TIFF sRGB-encoded; texels are linear Rec.709 radiance. Top row "
-                    "+Z, column u along azimuth pi - 2 pi u from +X towards +Y (Blender's "
+                    "PNG/JPEG/TIFF sRGB-encoded; texels are linear Rec.709 radiance. A "
+                    "spectral EXR (Fichet et al. 2021 layout: channels S0.<wavelength><unit>, "
+                    "as spectral-exr output writes) gives lab spectral radiance per texel, "
+                    "interpolated linearly between its wavelengths and 0 outside them. Top "
+                    "row +Z, column u along azimuth pi - 2 pi u from +X towards +Y (Blender's "
                     "Environment Texture).")
     strength: NonNegative = Field(1.0, description="Radiance scale.")
     rotation_z: Number = Field(0.0, description="Degrees: turns the map about +Z (adds to "
