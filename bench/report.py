@@ -661,14 +661,13 @@ def _section_adaptive(add, d, plots, md) -> None:
 
 SKIP_NOTES = {
     "rgb when Doppler is off": (
-        "**Not skipped automatically.** A `cie1931` job with `doppler = false` still runs "
-        "the 4-lane spectral path (hero sampling, 4 table lookups per lane, the CMF "
-        "integration). Switching to the `rgb` path would change the picture (RGB "
-        "multiplies channels per bounce: about 1–3 ΔE00 in indirect light, see §2), so it "
-        "is a model choice, not a pure skip; the measured gain is in the B / A column. "
-        "Where it would go: `core/render/frames.py` `build_renderer`/`FrameRenderer.__init__` "
-        "(`mode = \"rgb\"` when `not settings.doppler` and the user asked for it, e.g. "
-        "`spectral = \"auto\"`)."),
+        "**Skipped when asked: `spectral = \"auto\"`.** A `cie1931` job with `doppler = "
+        "false` runs the 4-lane spectral path (hero sampling, 4 table lookups per lane, the "
+        "CMF integration). The `rgb` path changes the picture (RGB multiplies channels per "
+        "bounce: about 1–3 ΔE00 in indirect light, see §2), so it is a model choice, not a "
+        "pure skip: the opt-in `render.spectral = \"auto\"` takes it when nothing shifts "
+        "wavelengths (`doppler = false`, or nothing moves in any frame; "
+        "`core/scene/spectral_model.py`), and the B / A column is its saving."),
     "β = 0 path (no boost)": (
         "**Skipped.** `camera._primary_rays` branches on b > 0 per ray, so at β = 0 no "
         "aberration or Doppler factor is computed; the difference to the general path is "

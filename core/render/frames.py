@@ -30,6 +30,7 @@ from ..physics import relativity, spectrum
 from ..scene.description import Job, RenderSettings
 from ..scene.geometry import Scene, build_scene
 from ..scene.motion import resolve_camera
+from ..scene.spectral_model import resolved_job
 from . import environment
 from .accel import MISS_DISTANCE, Accel
 from .camera import PinholeCamera
@@ -413,6 +414,7 @@ def build_renderer(job: Job, scene: Scene | None = None,
                    threads: int | None = None) -> FrameRenderer:
     """A :class:`FrameRenderer` for ``job`` (scene, BVH, tables); ``threads`` overrides."""
     scene = scene if scene is not None else build_scene(job)
+    job = resolved_job(job, scene)  # render.spectral = "auto"
     cam = resolve_camera(job, scene)
     s = job.render if threads is None else replace(job.render, threads=int(threads))
     prep = prepare(scene, s.spectral)

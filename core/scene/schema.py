@@ -78,7 +78,7 @@ from .description import (
     MOTION_MODES,
     OUTPUT_FORMATS,
     SHAPES,
-    SPECTRAL_MODES,
+    SPECTRAL_CHOICES,
     STAR_CATALOGUES,
 )
 
@@ -349,8 +349,10 @@ class Render(Table):
         0.0, description="Adaptive sampling: a pixel stops below this relative error; 0 = off.")
     max_depth: _int(1, MAX_DEPTH) = Field(8, description="Path segments.")
     seed: _int(0, MAX_SEED) = Field(0, description="Random seed (a 64-bit integer).")
-    spectral: _choice(SPECTRAL_MODES) = Field(
-        "cie1931", description="Spectral model (physics.md).")
+    spectral: _choice(SPECTRAL_CHOICES) = Field(
+        "cie1931", description="Spectral model (physics.md); \"auto\": rgb when nothing "
+                               "shifts wavelengths (doppler = false, or nothing moves in any "
+                               "frame), else cie1931 (README, \"Spectral models\").")
     doppler: Bool = Field(True, description="false: wavelengths are not shifted (geometry "
                                             "only).")
     searchlight: Bool = Field(True, description="D^5 spectral radiance transform.")
