@@ -58,8 +58,8 @@ direction the map lights, which MIS needs to stay unbiased (no uniform mix is ne
 a bilinear lookup would need one, since it spreads a texel's light into neighbours of
 weight 0). A map that is black everywhere is no light (power 0).
 
-:data:`NEE` (internal switch for ``bench/environment.py``, not a job key): False leaves
-the map out of the light table, so it is reached by BSDF sampling only.
+``prepare(..., env_nee=False)`` (:mod:`.frames`; ``bench/environment.py``, not a job key)
+leaves the map out of the light table, so it is reached by BSDF sampling only.
 """
 
 from __future__ import annotations
@@ -74,8 +74,6 @@ from ..physics import spectrum
 from ..physics.rgb_table import coefficients, lambda_of_column, sigmoid_reflectance
 from ..scene.sky import EnvironmentImage
 
-#: Next-event estimation samples the map (False: BSDF sampling only; benchmarks).
-NEE = True
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance weights
 #: A spectral texel's sampling weight beside its luminance: this share of its mean band
 #: radiance (× Ȳ), so bands outside the visible are sampled (module docstring).
