@@ -685,6 +685,28 @@ SKIP_NOTES = {
         "triangles, lights with power > 0, the sky only when the background is not "
         "black); B adds a sky of 1e-6 to show what a useless light costs: its share of "
         "the NEE samples is wasted and the error at equal spp rises (rel. MSE columns)."),
+    "no velocity-group traversal without moving bodies": (
+        "**Skipped.** `frames.prepare` traces a scene without moving bodies through its "
+        "one static BVH (`accel.Accel`); only a velocity group brings in "
+        "`rest_frames.MovingScene` (the rest-frame transform of every ray, one more "
+        "traversal per group and the merge of the nearest hits, for camera, continuation "
+        "and shadow rays alike). B's group is hit by no ray, so B / A is the traversal "
+        "cost alone (§5b measures groups that are hit)."),
+    "no texture fetch for untextured materials": (
+        "**Skipped.** Without a textured material `frames.scene_textures` gives no "
+        "texture table and `integrator.shade` skips the UV interpolation, the mip level "
+        "from the ray cone and the texel's spectrum per lane (`t_on` false); B looks up "
+        "a 1 × 1 texture on every hit (the per-lane spectrum of the texel's colour from "
+        "the Jakob–Hanika table, §5e)."),
+    "no environment sampling without a map": (
+        "**Skipped.** Without `scene.environment` the map is no light of the NEE table "
+        "and a miss reads no texel (`env_on` false); B's map of 1e-6 takes a share of the "
+        "light samples, as the useless sky does above."),
+    "no star pass without stars": (
+        "**Skipped.** `FrameRenderer._add_stars` returns at once without `scene.stars`; "
+        "B aberrates, Doppler-shifts, occlusion-tests and splats the ~5,000 stars to "
+        "magnitude 6 once per frame. It is a per-frame cost, so per spp it shrinks as "
+        "spp grows."),
 }
 
 
@@ -779,7 +801,8 @@ def _section_environment(add, d) -> None:
         f"{ref['width']:.0f} × {ref['height']:.0f}, max_depth 4, {ref['threads']:.0f} "
         f"threads). *nee*: the renderer as shipped (the map sampled in proportion to its "
         f"texels' power, MIS with BSDF sampling); *bsdf only*: the same with "
-        f"`core.render.environment.NEE = False` (an internal switch, not a job key). "
+        f"`prepare(..., env_nee=False)` (an internal switch of `core.render.frames`, not "
+        f"a job key). "
         f"Relative MSE against a {ref['spp']:.0f}-spp NEE render of another seed, process "
         f"CPU time, medians over seeds; load average {ref['load']:.2f} at the start.\n")
     add(table(rows[1:], [("series", "series", ""), ("spp", "spp", ".0f"),

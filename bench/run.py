@@ -188,7 +188,7 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
     if "skips" in sections:
         section("skips")
         rows = skips.variant_rows(plan.skip_spp, plan.skip_size, plan.skip_size, threads,
-                                  plan.skip_repeat, plan.skip_ref_spp)
+                                  plan.skip_repeat, plan.skip_ref_spp, tmp)
         if plan.anim_frames:
             rows += skips.animation_rows(tmp, plan.anim_frames, plan.anim_separate,
                                          plan.anim_spp, threads)

@@ -87,6 +87,13 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     # the report regenerates from the CSVs alone
     report.write(out, tmp_path / "again.md")
     assert "## 5. Skip" in (tmp_path / "again.md").read_text()
-    assert set(skips._variant_jobs()) <= {r["skip"] for r in
-                                          common.read_csv(out / "skips.csv")}
+    skip_rows = {r["skip"]: r for r in common.read_csv(out / "skips.csv")}
+    assert set(skips._variant_jobs(tmp_path / "skip_images")) <= set(skip_rows)
+    for name in ("no velocity-group traversal without moving bodies",
+                 "no texture fetch for untextured materials",
+                 "no environment sampling without a map", "no star pass without stars"):
+        assert skip_rows[name]["B_over_A"] > 0.0, name
+    # B's environment map enters the NEE table: one light more than A
+    env = skip_rows["no environment sampling without a map"]
+    assert env["lights_B"] == env["lights_A"] + 1
     assert convergence.ConvergenceConfig().ref_spp == 16 * 256
