@@ -225,6 +225,7 @@ def write(out: Path, md: Path) -> Path:
         "convergence_medians", "equal_error", "converged_compare", "adaptive_gain",
         "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups",
         "moving_emitter_noise", "environment_nee", "first_render", "viewport_first",
+        "first_cli",
         "textures", "textures_baseline")}
     conv_cfg = meta.get("sections", {}).get("convergence", {}).get("config")
     if d["convergence_medians"] and conv_cfg:
@@ -784,6 +785,17 @@ def _section_first(add, d) -> None:
                                          ("preview (s)", "preview_s", ".2f"),
                                          ("first full-size sample (s)", "first_sample_s",
                                           ".2f")]))
+        add("")
+    if d.get("first_cli"):
+        add("The command line: `relray render presets/cornell.toml --spp 1` (256², 1 spp, "
+            "the EXR and PNG written), from process start to exit; *cold*: an empty kernel "
+            "cache, *warm*: the median of "
+            f"{d['first_cli'][-1]['repeat']:.0f} runs with the cache filled. The goal of "
+            "issue 12 is 1 s warm.\n")
+        add(table(d["first_cli"], [("case", "case", ""), ("wall (s)", "wall_s", ".2f"),
+                                   ("CPU (s)", "cpu_s", ".2f"),
+                                   ("of it: imports (s)", "import_s", ".2f"),
+                                   ("load", "load", ".1f")]))
         add("")
 
 

@@ -221,6 +221,7 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         section("first")
         cm.write_csv(out / "first_render.csv", first_render.rows())
         cm.write_csv(out / "viewport_first.csv", first_render.viewport_rows())
+        cm.write_csv(out / "first_cli.csv", first_render.cli_rows())
         done("first")
     if "convergence" in sections:
         section("convergence")

@@ -153,6 +153,9 @@ def animation_rows(tmp: Path, frames: int, separate: int, spp: int,
     """
     data = cm.job_dict(cm.FLYBY)
     data["scene"] = dict(data["scene"], include=str(cm.REPO / "presets" / "cornell.toml"))
+    # the job moves to ``tmp``: its texture files stay where the preset names them
+    data["materials"] = [{k: str(cm.FLYBY.parent / v) if k.endswith("_texture") else v
+                          for k, v in m.items()} for m in data.get("materials", [])]
     data["render"] = dict(data["render"], spp=spp, threads=threads)
     data["output"] = dict(data["output"], dir=str(tmp / "flyby_out"))
     job = cm.write_job(data, tmp / "flyby_bench.toml")

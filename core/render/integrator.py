@@ -291,15 +291,38 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
-    """v0, edges, unit geometric normal and area of each triangle (local coordinates)."""
-    t = np.asarray(triangles, np.float64) - origin
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    c = np.cross(e1, e2)
-    norm = np.linalg.norm(c, axis=1)
-    ng = c / np.maximum(norm, 1e-300)[:, None]
-    f = np.float32
-    return {"v0": t[:, 0].astype(f), "e1": e1.astype(f), "e2": e2.astype(f),
-            "ng": ng.astype(f), "area": (0.5 * norm).astype(f)}
+    """v0, edges, unit geometric normal and area of each triangle (local coordinates):
+    with t = vertex − origin in float64, e1 = t1 − t0, e2 = t2 − t0, c = e1 × e2,
+    ng = c/|c| (0 for |c| = 0), area = |c|/2, each stored as float32."""
+    t = np.ascontiguousarray(triangles, np.float64)
+    n = len(t)
+    out = {k: np.empty((n, 3), np.float32) for k in ("v0", "e1", "e2", "ng")}
+    out["area"] = np.empty(n, np.float32)
+    _triangle_geometry(t, np.asarray(origin, np.float64), out["v0"], out["e1"], out["e2"],
+                       out["ng"], out["area"])
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _triangle_geometry(t, origin, v0, e1, e2, ng, area):
+    for i in range(t.shape[0]):
+        p0x, p0y, p0z = t[i, 0, 0] - origin[0], t[i, 0, 1] - origin[1], t[i, 0, 2] - origin[2]
+        ax = (t[i, 1, 0] - origin[0]) - p0x
+        ay = (t[i, 1, 1] - origin[1]) - p0y
+        az = (t[i, 1, 2] - origin[2]) - p0z
+        bx = (t[i, 2, 0] - origin[0]) - p0x
+        by = (t[i, 2, 1] - origin[1]) - p0y
+        bz = (t[i, 2, 2] - origin[2]) - p0z
+        v0[i, 0], v0[i, 1], v0[i, 2] = p0x, p0y, p0z
+        e1[i, 0], e1[i, 1], e1[i, 2] = ax, ay, az
+        e2[i, 0], e2[i, 1], e2[i, 2] = bx, by, bz
+        cx = ay * bz - az * by
+        cy = az * bx - ax * bz
+        cz = ax * by - ay * bx
+        norm = math.sqrt(cx * cx + cy * cy + cz * cz)
+        inv = 1.0 / max(norm, 1e-300)
+        ng[i, 0], ng[i, 1], ng[i, 2] = cx * inv, cy * inv, cz * inv
+        area[i] = 0.5 * norm
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
