@@ -225,7 +225,7 @@ def write(out: Path, md: Path) -> Path:
         "convergence_medians", "equal_error", "converged_compare", "adaptive_gain",
         "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups",
         "moving_emitter_noise", "environment_nee", "first_render", "viewport_first",
-        "first_cli",
+        "first_cli", "profile_scenes",
         "textures", "textures_baseline")}
     conv_cfg = meta.get("sections", {}).get("convergence", {}).get("config")
     if d["convergence_medians"] and conv_cfg:
@@ -953,6 +953,44 @@ def _section_profile(add, d, plots, md, meta) -> None:
                        ("1 lane instead of 4", "one_lane_ns", ".0f"),
                        ("fastmath recompile", "fastmath_ns", ".0f")]))
         add("")
+    _section_profile_scenes(add, d)
+
+
+def _section_profile_scenes(add, d) -> None:
+    rows = d["profile_scenes"]
+    if not rows:
+        return
+    from relray.bench.profile_scenes import SCENES
+
+    scenes = [s for s in SCENES if any(r["scene"] == s for r in rows)]
+    totals = {r["scene"]: r for r in rows if r["stage"] == "total"}
+    t0 = totals[scenes[0]]
+    add(f"### Per scene\n\n`.venv/bin/python -m relray.bench.profile_scenes --size "
+        f"{t0['size']:.0f} --spp {t0['spp']:.0f}` (`bench/results/profile_scenes.csv`): "
+        f"ns of CPU per path in each stage, {t0['size']:.0f}², {t0['spp']:.0f} spp, 1 "
+        "thread, one render each. *cornell*: the box; *heavy*: its displaced-grid floor "
+        "(§3); *environment*: ground, sphere and box lit by a map with a small sun (§5d); "
+        "*textured*: the textured box (§5e); *moving*: the whole room as one velocity "
+        "group (§5b).\n")
+    stages = [r["stage"] for r in rows if r["scene"] == scenes[0] and r["stage"] != "total"]
+    by = {(r["scene"], r["stage"]): r for r in rows}
+    cols = [("stage", "stage", "")] + [
+        (s, (lambda r, s=s: by.get((s, r["stage"]), {}).get("ns_per_path", 0.0)), ".0f")
+        for s in scenes]
+    body = [{"stage": st} for st in stages
+            if any(by.get((s, st), {}).get("ns_per_path", 0.0) > 0.5 for s in scenes)]
+    body.append({"stage": "**total**"})
+    for s in scenes:
+        by[(s, "**total**")] = totals[s]
+    add(table(body, cols))
+    add("\n| | " + " | ".join(scenes) + " |\n|---|" + "---|" * len(scenes))
+    add("| M paths per CPU-second | " + " | ".join(
+        f"{totals[s]['paths_per_cpu_s'] / 1e6:.2f}" for s in scenes) + " |")
+    add("| Embree share % | " + " | ".join(
+        f"{100 * totals[s]['embree_share']:.0f}" for s in scenes) + " |")
+    add("| rays per path | " + " | ".join(
+        f"{totals[s]['rays_per_path']:.2f}" for s in scenes) + " |")
+    add("")
 
 
 def _ns(d, *stages: str) -> float:

@@ -65,7 +65,7 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     run.run(run.SMOKE, out, md, use_cycles=cycles_anchor.bpy_available(), log=lambda *a: None)
     for name in ("throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
                  "velocity_groups", "convergence_medians", "equal_error", "adaptive_gain",
-                 "shade_breakdown", "environment_nee",
+                 "shade_breakdown", "environment_nee", "profile_scenes",
                  *(("embree_floor",) if embree_floor.library() is not None else ())):
         rows = common.read_csv(out / f"{name}.csv")
         assert rows, name
@@ -80,7 +80,13 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     assert (out / "convergence.png").exists() and (out / "profile.png").exists()
     text = md.read_text()
     assert "## Headline" in text and "## 6. Profile" in text and "## 5b. Moving" in text
-    assert "## 5d. Environment maps" in text
+    assert "## 5d. Environment maps" in text and "### Per scene" in text
+    prof = common.read_csv(out / "profile_scenes.csv")
+    assert {r["scene"] for r in prof} == {"cornell", "heavy", "environment", "textured",
+                                         "moving"}
+    moving = {r["stage"]: r for r in prof if r["scene"] == "moving"}
+    assert moving["velocity groups: rest-frame rays, merge"]["seconds"] > 0.0
+    assert all(r["ns_per_path"] > 0.0 for r in prof if r["stage"] == "total")
     groups = {r["variant"]: r for r in common.read_csv(out / "velocity_groups.csv")}
     assert [groups[f"{n} groups"]["groups"] for n in (0, 1, 2, 4, 8)] == [0, 1, 2, 4, 8]
     assert groups["0 groups"]["over_static"] == 1.0
