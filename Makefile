@@ -85,8 +85,9 @@ gallery: $(STAMP)
 ## the Mitsuba 3 peer of the benchmark, in a venv of its own (its numpy and Dr.Jit never
 ## meet the core's): exactly bench/mitsuba.lock, plus Debian's libLLVM 19 unpacked into
 ## .cache/llvm19 without root (apt-get download + dpkg -x) for the llvm_ad_spectral
-## variant (LLVM 15/16 abort with "Cannot select ... fminimum").  Where apt-get download
-## cannot run, the LLVM variant is reported as not run, with the reason.
+## variant (LLVM 15/16 abort with "Cannot select ... fminimum"; apt-get update first only
+## when root and the package lists lack it).  Where that cannot run, the bench reports the
+## LLVM variant as not run, with the reason.
 MITSUBA_VENV := .cache/mitsuba-venv
 MITSUBA_STAMP := $(MITSUBA_VENV)/.installed-stamp
 $(MITSUBA_STAMP): bench/mitsuba.lock
@@ -96,8 +97,10 @@ $(MITSUBA_STAMP): bench/mitsuba.lock
 		--require-hashes --no-deps -r bench/mitsuba.lock
 	-test -e .cache/llvm19/root/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1 || \
 		(rm -rf .cache/llvm19 && mkdir -p .cache/llvm19 && cd .cache/llvm19 && \
-		 apt-get download libllvm19 </dev/null && dpkg -x libllvm19_*.deb root && \
-		 rm -f libllvm19_*.deb) || echo "note: libLLVM 19 not available; llvm_ad_spectral will be skipped"
+		 { apt-get download libllvm19 </dev/null || { [ "$$(id -u)" = 0 ] && \
+		   apt-get update -qq </dev/null && apt-get download libllvm19 </dev/null; }; } && \
+		 dpkg -x libllvm19_*.deb root && rm -f libllvm19_*.deb) || \
+		echo "note: libLLVM 19 not available; the bench reports llvm_ad_spectral as not run"
 	touch $(MITSUBA_STAMP)
 
 mitsuba-venv: $(MITSUBA_STAMP)

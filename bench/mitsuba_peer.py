@@ -283,19 +283,34 @@ def run(cfg: MitsubaConfig, tmp: Path, log=print) -> dict[str, Any]:
             try:
                 w = MitsubaWorker(v, files, log=tmp / f"mitsuba_{v}.log")
                 w.start()
-                t = MitsubaWorker(v, tp_files, log=tmp / f"mitsuba_{v}.log")
-                t.start()
-                workers[v], tp_workers[v] = w, t
+                workers[v] = w
+                # a first render: the LLVM JIT aborts here when libLLVM is too old
+                w.render(cfg.spp[0], tmp / "mitsuba_first.npy", threads=1)
+                tp_workers[v] = MitsubaWorker(v, tp_files, log=tmp / f"mitsuba_{v}.log")
+                tp_workers[v].start()
             except (RuntimeError, OSError) as e:
-                why = str(e)
+                why = f"{e}; {_last_line(tmp / f'mitsuba_{v}.log')}"
+                for ws in (workers, tp_workers):
+                    if v in ws:
+                        ws.pop(v).close()
         status.append({"variant": v, "ran": why is None, "reason": why or "",
                        "version": workers[v].version if v in workers else ""})
+
         log(f"  mitsuba {v}: {'ready' if why is None else 'not run: ' + why}")
     try:
         return _measure(cfg, tmp, bench, tp_bench, workers, tp_workers, status, log)
     finally:
         for w in (*workers.values(), *tp_workers.values()):
             w.close()
+
+
+def _last_line(log: Path) -> str:
+    """The last non-empty line of a worker's log (why it stopped), or ''."""
+    try:
+        lines = [x for x in log.read_text(errors="replace").splitlines() if x.strip()]
+    except OSError:
+        return ""
+    return lines[-1][-300:] if lines else ""
 
 
 def _measure(cfg, tmp, bench, tp_bench, workers, tp_workers, status, log) -> dict[str, Any]:
