@@ -87,6 +87,22 @@ def unavailable(variant: str) -> str | None:
     return None
 
 
+def simd() -> str:
+    """The widest x86 vector extension of this CPU (what Dr.Jit's LLVM backend targets:
+    AVX-512 runs 16 float lanes per instruction, AVX2 8)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return "unknown"
+    flags = next((ln.split(":", 1)[1].split() for ln in text.splitlines()
+                  if ln.startswith("flags")), [])
+    for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"),
+                       ("sse4_2", "SSE4.2")):
+        if flag in flags:
+            return name
+    return "none found"
+
+
 # ----------------------------------------------------------------------------- the scene
 def scene_dict(job: Job, scene: Scene, width: int, height: int, max_depth: int,
                meshes: list[str]) -> dict[str, Any]:

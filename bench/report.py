@@ -669,6 +669,13 @@ def _section_mitsuba(add, d, plots, md, meta) -> None:
                           ("measured", "measured", ""),
                           ("met", lambda r: "yes" if r["met"] else "**no**", "")]))
         add("")
+        add(f"A goal counts as met only when it holds at both error levels. The CPU "
+            f"has {sec.get('simd', 'an unrecorded vector extension')} (Dr.Jit's LLVM "
+            "backend runs 8 float lanes per instruction with AVX2, 16 with AVX-512, so "
+            "`llvm_ad_spectral` gains on an AVX-512 machine and these ratios do not carry "
+            "over to one). The machine was shared during the run (the load above; CPU "
+            "time is what each renderer got, but a crowded core's caches slow every "
+            "renderer somewhat, and not necessarily equally).\n")
 
 
 def _section_throughput(add, d, plots, md, meta) -> None:

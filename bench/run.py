@@ -263,7 +263,7 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
                      "throughput_raw"):
             cm.write_csv(out / f"mitsuba_{name}.csv", res[name])
         report.plot_mitsuba_converged(res["refs"], out / "mitsuba_converged.png")
-        done("mitsuba", config=res["config"],
+        done("mitsuba", config=res["config"], simd=mitsuba_peer.simd(),
              versions={r["variant"]: r["version"] for r in res["status"]})
     meta["cpu_share_end"] = cm.cpu_share(seconds=plan.probe_s)
     meta["load_end"] = cm.load_average()
