@@ -321,12 +321,14 @@ def run(cfg: MitsubaConfig, tmp: Path, log=print) -> dict[str, Any]:
 
 
 def _last_line(log: Path) -> str:
-    """The last non-empty line of a worker's log (why it stopped), or ''."""
+    """Why a worker stopped, from its log: the last ``LLVM ERROR`` line (the JIT's abort,
+    e.g. "Cannot select ... fminimum" with libLLVM 15/16), else the last line, or ''."""
     try:
         lines = [x for x in log.read_text(errors="replace").splitlines() if x.strip()]
     except OSError:
         return ""
-    return lines[-1][-300:] if lines else ""
+    errors = [x for x in lines if "LLVM ERROR" in x]
+    return (errors or lines or [""])[-1][:300]
 
 
 def _measure(cfg, tmp, bench, tp_bench, workers, tp_workers, status, log) -> dict[str, Any]:

@@ -138,3 +138,14 @@ def test_missing_mitsuba_is_reported(monkeypatch, tmp_path):
     monkeypatch.delenv("DRJIT_LIBLLVM_PATH", raising=False)
     assert mp.unavailable("scalar_spectral") is None
     assert "libLLVM" in mp.unavailable("llvm_ad_spectral")
+
+
+def test_a_jit_abort_is_named_by_its_llvm_error(tmp_path):
+    # what Dr.Jit prints when libLLVM 15/16 cannot compile Mitsuba's kernel
+    log = tmp_path / "w.log"
+    log.write_text("loading\nLLVM ERROR: Cannot select: f32 = fminimum a, b\n  a: f32\n"
+                   "In function: drjit_0\n")
+    assert mp._last_line(log).startswith("LLVM ERROR: Cannot select")
+    log.write_text("ImportError: no libLLVM\n")
+    assert mp._last_line(log) == "ImportError: no libLLVM"
+    assert mp._last_line(tmp_path / "missing.log") == ""
