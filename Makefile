@@ -8,6 +8,7 @@ UV     := uv==0.13.9
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.cache/numba
 
 .PHONY: venv lock demo test lint stress bench bench-quick clean gallery extension test-blender \
+	mitsuba-venv mitsuba-lock \
 	blender-pictures
 
 ## the venv: exactly the versions (and file hashes) of requirements.lock, then relray
@@ -81,16 +82,47 @@ gallery: $(STAMP)
 	$(BIN)/python docs/gallery.py
 	$(BIN)/python docs/starbow.py
 
+## the Mitsuba 3 peer of the benchmark, in a venv of its own (its numpy and Dr.Jit never
+## meet the core's): exactly bench/mitsuba.lock, plus Debian's libLLVM 19 unpacked into
+## .cache/llvm19 without root (apt-get download + dpkg -x) for the llvm_ad_spectral
+## variant (LLVM 15/16 abort with "Cannot select ... fminimum"; apt-get update first only
+## when root and the package lists lack it).  Where that cannot run, the bench reports the
+## LLVM variant as not run, with the reason.
+MITSUBA_VENV := .cache/mitsuba-venv
+MITSUBA_STAMP := $(MITSUBA_VENV)/.installed-stamp
+$(MITSUBA_STAMP): bench/mitsuba.lock
+	rm -rf $(MITSUBA_VENV)
+	$(PYTHON) -m venv $(MITSUBA_VENV)
+	$(MITSUBA_VENV)/bin/python -m pip install --quiet --disable-pip-version-check \
+		--require-hashes --no-deps -r bench/mitsuba.lock
+	-test -e .cache/llvm19/root/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1 || \
+		(rm -rf .cache/llvm19 && mkdir -p .cache/llvm19 && cd .cache/llvm19 && \
+		 { apt-get download libllvm19 </dev/null || { [ "$$(id -u)" = 0 ] && \
+		   apt-get update -qq </dev/null && apt-get download libllvm19 </dev/null; }; } && \
+		 dpkg -x libllvm19_*.deb root && rm -f libllvm19_*.deb) || \
+		echo "note: libLLVM 19 not available; the bench reports llvm_ad_spectral as not run"
+	touch $(MITSUBA_STAMP)
+
+mitsuba-venv: $(MITSUBA_STAMP)
+
+## make mitsuba-lock: resolve bench/mitsuba.in into bench/mitsuba.lock (hashed, like lock)
+mitsuba-lock:
+	rm -rf .cache/lock-venv && $(PYTHON) -m venv .cache/lock-venv
+	.cache/lock-venv/bin/python -m pip install --quiet --disable-pip-version-check "$(UV)"
+	.cache/lock-venv/bin/uv pip compile bench/mitsuba.in --python-version 3.11 \
+		--python-platform x86_64-manylinux_2_28 --generate-hashes \
+		--custom-compile-command "make mitsuba-lock" -o bench/mitsuba.lock
+
 ## make bench: the benchmark suite (10 min idle, up to an hour busy): bench/results/*.csv,
 ## plots, bench/RESULTS.md; installs bpy 5.0.1 (Cycles, the anchor) if it is missing
-bench: $(STAMP)
+bench: $(STAMP) $(MITSUBA_STAMP)
 	$(BIN)/python -c "import bpy" 2>/dev/null || \
 		$(BIN)/python -m pip install --quiet --disable-pip-version-check "bpy==5.0.1"
 	$(BIN)/python -m relray.bench.run
 
 ## make bench-quick: the same at small sizes in under 3 minutes (bench/results/quick/);
 ## Cycles comes from the dev extra's bpy (without bpy its series are left out)
-bench-quick: $(STAMP)
+bench-quick: $(STAMP) $(MITSUBA_STAMP)
 	$(BIN)/python -m relray.bench.run --quick
 
 clean:

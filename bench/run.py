@@ -7,10 +7,14 @@ Sections (``--only a,b``): ``throughput`` (Cornell throughput and the stage prof
 ``scaling`` (1 against 2 threads), ``heavy`` (≥ 1 M triangles), ``beta`` (the |β|
 sweep), ``skips`` (the skip table), ``moving`` (the cost of velocity groups),
 ``convergence`` (error against time, relray against
-Cycles, adaptive sampling).  Cycles needs ``bpy`` (5.0.1) in the environment; without
-it the Cycles series are left out and RESULTS.md says so.  Generated meshes and Cycles'
-cached references go to ``OUT/tmp`` (git-ignored).  ``python -m relray.bench.report
---out OUT`` rewrites the plots and RESULTS.md from the CSVs without rendering.
+Cycles, adaptive sampling), ``mitsuba`` (Mitsuba 3 ``scalar_spectral`` and
+``llvm_ad_spectral`` as peers: converged agreement, equal-error CPU time and paths per
+CPU-second at 1 thread; Mitsuba runs in its own venv from ``make mitsuba-venv``, a
+variant that cannot start is reported with its reason).  Cycles needs ``bpy`` (5.0.1)
+in the environment; without it the Cycles series are left out and RESULTS.md says so.
+Generated meshes and cached references go to ``OUT/tmp`` (git-ignored).
+``python -m relray.bench.report --out OUT`` rewrites the plots and RESULTS.md from the
+CSVs without rendering.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import json
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +34,7 @@ from relray.bench import (
     embree_floor,
     environment,
     first_render,
+    mitsuba_peer,
     profile_scenes,
     report,
     skips,
@@ -39,7 +44,7 @@ from relray.bench import (
 )
 
 SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "environment",
-            "textures", "first", "profiles", "convergence")
+            "textures", "first", "profiles", "convergence", "mitsuba")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -86,6 +91,7 @@ class Plan:
     wait_idle_s: float = 600.0
     probe_s: float = 0.4
     conv: convergence.ConvergenceConfig = field(default_factory=convergence.ConvergenceConfig)
+    mitsuba: mitsuba_peer.MitsubaConfig = field(default_factory=mitsuba_peer.MitsubaConfig)
 
 
 FULL = Plan("full")
@@ -100,7 +106,10 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
              conv=convergence.ConvergenceConfig(width=64, height=64,
                                                 spp=[4, 8, 16, 32, 64, 128],
                                                 thresholds=[0.1, 0.05], repeats=2,
-                                                ref_factor=8))
+                                                ref_factor=8),
+             mitsuba=mitsuba_peer.MitsubaConfig(width=64, height=64, spp=[4, 16, 64],
+                                                repeats=2, ref_spp=1024, tp_size=128,
+                                                tp_spp=4, tp_repeats=2))
 SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repeat=1,
              profile_size=8, profile_spp=1,
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
@@ -111,11 +120,14 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
              first_render=False, anim_frames=0, anim_separate=0,
              anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
              conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
-                                                thresholds=[0.5], repeats=1, ref_factor=2))
+                                                thresholds=[0.5], repeats=1, ref_factor=2),
+             mitsuba=mitsuba_peer.MitsubaConfig(width=8, height=8, spp=[4, 16], repeats=1,
+                                                ref_spp=64, ref_threads=1, tp_size=8,
+                                                tp_spp=4, tp_repeats=1))
 
 
 def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECTIONS,
-        use_cycles: bool = True, log=print) -> dict[str, Any]:
+        use_cycles: bool = True, use_mitsuba: bool = True, log=print) -> dict[str, Any]:
     """Run ``sections`` of ``plan``; write CSVs and meta.json into ``out``, then the report."""
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / "tmp"
@@ -250,6 +262,21 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         cm.write_csv(out / "adaptive_gain.csv", gain)
         done("convergence", config=res["config"], cycles_version=res["cycles_version"],
              ref_seconds=res["ref_seconds"])
+    if "mitsuba" in sections:
+        section("mitsuba")
+        mcfg = plan.mitsuba
+        if not use_mitsuba:
+            mcfg = replace(mcfg, variants=())
+        res = mitsuba_peer.run(mcfg, tmp, log=log)
+        if not use_mitsuba:
+            res["status"] = [{"variant": v, "ran": False, "reason": "left out (--no-mitsuba)",
+                              "version": ""} for v in mitsuba_peer.VARIANTS]
+        for name in ("status", "converged", "raw", "medians", "equal_error", "throughput",
+                     "throughput_raw"):
+            cm.write_csv(out / f"mitsuba_{name}.csv", res[name])
+        report.plot_mitsuba_converged(res["refs"], out / "mitsuba_converged.png")
+        done("mitsuba", config=res["config"], simd=mitsuba_peer.simd(),
+             versions={r["variant"]: r["version"] for r in res["status"]})
     meta["cpu_share_end"] = cm.cpu_share(seconds=plan.probe_s)
     meta["load_end"] = cm.load_average()
     meta["total_seconds"] = time.perf_counter() - t_start
@@ -269,6 +296,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--md", type=Path, help="RESULTS.md to write")
     ap.add_argument("--only", help=f"comma-separated sections of {','.join(SECTIONS)}")
     ap.add_argument("--no-cycles", action="store_true", help="leave Cycles out")
+    ap.add_argument("--no-mitsuba", action="store_true", help="leave Mitsuba 3 out")
     a = ap.parse_args(argv)
     plan = QUICK if a.quick else FULL
     out = a.out or (cm.RESULTS / "quick" if a.quick else cm.RESULTS)
@@ -277,7 +305,7 @@ def main(argv: list[str] | None = None) -> None:
     bad = set(sections) - set(SECTIONS)
     if bad:
         ap.error(f"unknown sections {sorted(bad)}; choose from {SECTIONS}")
-    run(plan, out, md, sections, use_cycles=not a.no_cycles)
+    run(plan, out, md, sections, use_cycles=not a.no_cycles, use_mitsuba=not a.no_mitsuba)
 
 
 if __name__ == "__main__":
