@@ -28,6 +28,10 @@ The task model
   The scene, BVH and spectral tables are built once per worker process and run
   (:func:`worker_renderer`). Before rendering, a task checks again whether its frame is
   done, so a task that is re-run after its frame was written renders nothing twice.
+  With ``output.exposure = "auto"`` a frame's PNG needs the meter readings of the frames
+  before it (:mod:`.output.exposure`), so the task resolves its frame and returns the
+  image instead, and the client writes the frames in frame order through one exposure
+  chain (:class:`_FramesInOrder`): the same exposures, files and resume as a local run.
 - **A still** (exactly one frame to render): the frame's samples are split into
   ``batches`` ranges [s_k, s_k+1) (:func:`sample_batches`), one task each
   (:func:`render_batch_task`), which returns its :class:`~.film.Film`. The client merges
