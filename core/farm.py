@@ -91,7 +91,7 @@ from typing import Any
 
 from . import user_cache_dir
 from .errors import UserError
-from .output.digest import frame_digest
+from .output.digest import frame_digest, job_digest
 from .output.frame_files import (
     FramePlan,
     check_frame_names,
@@ -493,7 +493,8 @@ def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
         _render_still(job, client, plan.todo[0], ranges, run_id, threads, reporter, result)
     else:
         reporter.start(job, plan, "dask", len(plan.todo), "frame", scheduler, workers)
-        _render_frames(job, client, plan, run_id, threads, overwrite, reporter, result)
+        _render_frames(job, client, plan.todo, run_id, threads, overwrite, reporter, result,
+                       plan)
     return result
 
 
@@ -515,7 +516,10 @@ class _FramesInOrder:
     """
 
     job: Job
-    plan: FramePlan
+    frames: list[int]
+    """The run's range (the chain's frames, :attr:`FramePlan.frames`)."""
+    todo: list[tuple[int, ShutterEvent]]
+    digests: Mapping[int, str]
     reporter: Reporter
     result: FarmResult
     queue: list[int] = field(default_factory=list)
@@ -523,9 +527,9 @@ class _FramesInOrder:
     blocked_by: int | None = None
 
     def __post_init__(self) -> None:
-        self.queue = [f for f, _ in sorted(self.plan.todo, key=lambda fe: fe[0])]
-        self.events = dict(self.plan.todo)
-        self.chain = exposure_chain(self.job, self.plan.frames)
+        self.queue = sorted(f for f, _ in self.todo)
+        self.events = dict(self.todo)
+        self.chain = exposure_chain(self.job, self.frames)
 
     def settle(self, frame: int, out: dict[str, Any] | None) -> None:
         """Frame ``frame`` arrived (``out``) or failed (None, already reported); write
@@ -550,7 +554,7 @@ class _FramesInOrder:
         try:
             paths, exposure = write_image(self.job, frame, self.events[frame], got["image"],
                                           got["seconds"], got["d_range"],
-                                          self.plan.digests[frame], self.chain)
+                                          self.digests[frame], self.chain)
         except UserError as e:  # the client writes: an output folder gone read-only, say
             self.result.user_errors.add(frame)
             self.result.failed[frame] = str(e)
@@ -565,21 +569,30 @@ class _FramesInOrder:
         self.reporter.frame_done(frame, [str(p) for p in paths], seconds, d_range, exposure)
 
 
-def _render_frames(job: Job, client: Any, plan: FramePlan, run_id: str,
+def _render_frames(job: Job, client: Any, todo: list[tuple[int, ShutterEvent]], run_id: str,
                    threads: int, overwrite: bool, reporter: Reporter,
-                   result: FarmResult) -> None:
+                   result: FarmResult, plan: FramePlan | None = None) -> None:
+    """Submit a task per frame of ``todo`` and report each as it arrives. ``plan``: the
+    run's plan (its range and resume digests); without it, the range is ``todo``'s
+    frames and the digests are computed here."""
     from distributed import as_completed
 
     slots = host_slots(client)
-    in_order = (_FramesInOrder(job, plan, reporter, result)
+    if plan is not None:
+        frames, digests = plan.frames, plan.digests
+    else:
+        base = job_digest(job)
+        frames = sorted(f for f, _ in todo)
+        digests = {f: frame_digest(job, f, ev, base) for f, ev in todo}
+    in_order = (_FramesInOrder(job, frames, todo, digests, reporter, result)
                 if job.output.exposure == AUTO_EXPOSURE else None)
     frame_of: dict[str, int] = {}
     futures = []
-    for i, (frame, ev) in enumerate(plan.todo):
+    for i, (frame, ev) in enumerate(todo):
         key = f"relray-frame-{frame}-{run_id}"
         frame_of[key] = frame
         futures.append(client.submit(render_frame_task, job, run_id, frame, ev, threads,
-                                     overwrite, slots, plan.digests[frame], in_order is None,
+                                     overwrite, slots, digests[frame], in_order is None,
                                      key=key, pure=False, retries=TASK_RETRIES,
                                      priority=-i))
     pending = as_completed(futures, loop=client.loop)
