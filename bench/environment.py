@@ -9,9 +9,10 @@ environment map: a dim blue sky (0.3, 0.4, 0.6) over a brown ground (0.1, 0.08, 
 and a small bright sun (2 × 2 texels of a 256 × 128 map, 2.8° × 2.8°, radiance 3000,
 40° above the horizon). Each series renders its own spp ladder (BSDF sampling needs
 far more samples for the same error); ``nee`` is the
-renderer as shipped, ``bsdf only`` the same with :data:`..core.render.environment.NEE`
-False (the internal switch that leaves the map out of the light table: it is then
-reached by BSDF sampling only, with MIS weight 1). Error: relative MSE
+renderer as shipped, ``bsdf only`` the same with ``env_nee`` of
+:func:`..core.render.frames.prepare` False (the internal switch that leaves the map out
+of the light table: it is then reached by BSDF sampling only, with MIS weight 1). Error:
+relative MSE
 (:func:`.common.rel_mse`) against one reference rendered with NEE at ``--ref-spp`` and
 another seed; time: the process CPU time of the render (both threads), so the machine's
 other load changes it less than wall time. Each point is the median over ``--repeats``
@@ -34,7 +35,6 @@ import numpy as np
 import OpenImageIO as oiio
 
 from relray.bench import common as cm
-from relray.core.render import environment
 from relray.core.render.frames import build_renderer
 from relray.core.scene.job import parse_job
 from relray.core.scene.motion import frame_events
@@ -76,12 +76,8 @@ def job_data(width: int, height: int, spp: int, threads: int, seed: int) -> dict
 
 def render(folder: Path, nee: bool, **kw) -> tuple[np.ndarray, float]:
     """(linear RGB, CPU seconds) of one render."""
-    environment.NEE = nee
-    try:
-        job = parse_job(job_data(**kw), folder / "job.toml")
-        r = build_renderer(job)
-    finally:
-        environment.NEE = True
+    job = parse_job(job_data(**kw), folder / "job.toml")
+    r = build_renderer(job, env_nee=nee)
     ev = dict(frame_events(job))
     f = min(ev)
     c0 = time.process_time()

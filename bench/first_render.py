@@ -89,6 +89,57 @@ def rows() -> list[dict]:
     return [{"case": name, "warmup_s": r["warmup"], "f12_s": r["f12"]} for name, r in cases]
 
 
+def _cli_once(job: Path, out: Path, kernels: Path | None) -> dict:
+    """Wall and CPU seconds of one ``relray render job --spp 1`` process (start to exit),
+    with ``kernels`` as its numba cache (None: the default one)."""
+    import resource
+    import time
+
+    env = dict(os.environ)
+    if kernels is not None:
+        env["NUMBA_CACHE_DIR"] = str(kernels)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "relray.core.cli", "render", str(job), "--spp", "1",
+                    "--out", str(out), "--overwrite", "--quiet"], env=env, check=True,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=1800)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_s": wall, "cpu_s": cpu}
+
+
+def _import_seconds() -> float:
+    """Seconds to import the command line's modules in a fresh process."""
+    out = subprocess.run([sys.executable, "-c", "import time; t = time.perf_counter(); "
+                          "import relray.core.cli; print(time.perf_counter() - t)"],
+                         capture_output=True, text=True, check=True)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def cli_rows(repeat: int = 3) -> list[dict]:
+    """Time to the first image from the command line: the Cornell box (256², 1 spp) by
+    ``relray render``, from process start to exit (the EXR and PNG written). *cold*: an
+    empty kernel cache (every kernel compiles); *warm*: the default cache, after one
+    render filled it, median of ``repeat``; with the import time of the command line."""
+    import statistics
+
+    job = Path(__file__).resolve().parent.parent / "presets" / "cornell.toml"
+    work = Path(tempfile.mkdtemp(prefix="relray-first-cli-"))
+    try:
+        cold = _cli_once(job, work / "out", work / "kernels")
+        _cli_once(job, work / "out", None)  # fill the default cache
+        warm = [_cli_once(job, work / "out", None) for _ in range(repeat)]
+        imports = statistics.median(_import_seconds() for _ in range(repeat))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return [{"case": "cold (empty kernel cache)", "wall_s": cold["wall_s"],
+             "cpu_s": cold["cpu_s"], "import_s": imports, "repeat": 1, "load": os.getloadavg()[0]},
+            {"case": "warm", "wall_s": statistics.median(w["wall_s"] for w in warm),
+             "cpu_s": statistics.median(w["cpu_s"] for w in warm), "import_s": imports,
+             "repeat": repeat, "load": os.getloadavg()[0]}]
+
+
 def viewport_rows(repeat: int = 3, width: int = 1280, height: int = 720) -> list[dict]:
     """The Rendered viewport's first images (``relblend.viewport``, warm kernels): seconds
     from a new view state to its quarter-size preview and to the first full-size sample,
@@ -139,6 +190,9 @@ def main() -> int:
     for r in rows():
         w = "—" if r["warmup_s"] is None else f"{r['warmup_s']:.1f}"
         print(f"| {r['case']} | {w} | {r['f12_s']:.1f} |")
+    for r in cli_rows():
+        print(f"relray render --spp 1, {r['case']}: {r['wall_s']:.2f} s wall, "
+              f"{r['cpu_s']:.2f} s CPU (imports {r['import_s']:.2f} s)")
     for r in viewport_rows():
         print(f"viewport {r['view']}: preview {r['preview_s']:.2f} s, first full-size "
               f"sample {r['first_sample_s']:.2f} s")

@@ -225,6 +225,7 @@ def write(out: Path, md: Path) -> Path:
         "convergence_medians", "equal_error", "converged_compare", "adaptive_gain",
         "shade_breakdown", "adaptive_diagnosis", "embree_floor", "velocity_groups",
         "moving_emitter_noise", "environment_nee", "first_render", "viewport_first",
+        "first_cli", "profile_scenes",
         "textures", "textures_baseline")}
     conv_cfg = meta.get("sections", {}).get("convergence", {}).get("config")
     if d["convergence_medians"] and conv_cfg:
@@ -661,14 +662,13 @@ def _section_adaptive(add, d, plots, md) -> None:
 
 SKIP_NOTES = {
     "rgb when Doppler is off": (
-        "**Not skipped automatically.** A `cie1931` job with `doppler = false` still runs "
-        "the 4-lane spectral path (hero sampling, 4 table lookups per lane, the CMF "
-        "integration). Switching to the `rgb` path would change the picture (RGB "
-        "multiplies channels per bounce: about 1–3 ΔE00 in indirect light, see §2), so it "
-        "is a model choice, not a pure skip; the measured gain is in the B / A column. "
-        "Where it would go: `core/render/frames.py` `build_renderer`/`FrameRenderer.__init__` "
-        "(`mode = \"rgb\"` when `not settings.doppler` and the user asked for it, e.g. "
-        "`spectral = \"auto\"`)."),
+        "**Skipped when asked: `spectral = \"auto\"`.** A `cie1931` job with `doppler = "
+        "false` runs the 4-lane spectral path (hero sampling, 4 table lookups per lane, the "
+        "CMF integration). The `rgb` path changes the picture (RGB multiplies channels per "
+        "bounce: about 1–3 ΔE00 in indirect light, see §2), so it is a model choice, not a "
+        "pure skip: the opt-in `render.spectral = \"auto\"` takes it when nothing shifts "
+        "wavelengths (`doppler = false`, or nothing moves in any frame; "
+        "`core/scene/spectral_model.py`), and the B / A column is its saving."),
     "β = 0 path (no boost)": (
         "**Skipped.** `camera._primary_rays` branches on b > 0 per ray, so at β = 0 no "
         "aberration or Doppler factor is computed; the difference to the general path is "
@@ -686,6 +686,28 @@ SKIP_NOTES = {
         "triangles, lights with power > 0, the sky only when the background is not "
         "black); B adds a sky of 1e-6 to show what a useless light costs: its share of "
         "the NEE samples is wasted and the error at equal spp rises (rel. MSE columns)."),
+    "no velocity-group traversal without moving bodies": (
+        "**Skipped.** `frames.prepare` traces a scene without moving bodies through its "
+        "one static BVH (`accel.Accel`); only a velocity group brings in "
+        "`rest_frames.MovingScene` (the rest-frame transform of every ray, one more "
+        "traversal per group and the merge of the nearest hits, for camera, continuation "
+        "and shadow rays alike). B's group is hit by no ray, so B / A is the traversal "
+        "cost alone (§5b measures groups that are hit)."),
+    "no texture fetch for untextured materials": (
+        "**Skipped.** Without a textured material `frames.scene_textures` gives no "
+        "texture table and `integrator.shade` skips the UV interpolation, the mip level "
+        "from the ray cone and the texel's spectrum per lane (`t_on` false); B looks up "
+        "a 1 × 1 texture on every hit (the per-lane spectrum of the texel's colour from "
+        "the Jakob–Hanika table, §5e)."),
+    "no environment sampling without a map": (
+        "**Skipped.** Without `scene.environment` the map is no light of the NEE table "
+        "and a miss reads no texel (`env_on` false); B's map of 1e-6 takes a share of the "
+        "light samples, as the useless sky does above."),
+    "no star pass without stars": (
+        "**Skipped.** `FrameRenderer._add_stars` returns at once without `scene.stars`; "
+        "B aberrates, Doppler-shifts, occlusion-tests and splats the ~5,000 stars to "
+        "magnitude 6 once per frame. It is a per-frame cost, so per spp it shrinks as "
+        "spp grows."),
 }
 
 
@@ -764,6 +786,17 @@ def _section_first(add, d) -> None:
                                          ("first full-size sample (s)", "first_sample_s",
                                           ".2f")]))
         add("")
+    if d.get("first_cli"):
+        add("The command line: `relray render presets/cornell.toml --spp 1` (256², 1 spp, "
+            "the EXR and PNG written), from process start to exit; *cold*: an empty kernel "
+            "cache, *warm*: the median of "
+            f"{d['first_cli'][-1]['repeat']:.0f} runs with the cache filled. The goal of "
+            "issue 12 is 1 s warm.\n")
+        add(table(d["first_cli"], [("case", "case", ""), ("wall (s)", "wall_s", ".2f"),
+                                   ("CPU (s)", "cpu_s", ".2f"),
+                                   ("of it: imports (s)", "import_s", ".2f"),
+                                   ("load", "load", ".1f")]))
+        add("")
 
 
 def _section_environment(add, d) -> None:
@@ -780,7 +813,8 @@ def _section_environment(add, d) -> None:
         f"{ref['width']:.0f} × {ref['height']:.0f}, max_depth 4, {ref['threads']:.0f} "
         f"threads). *nee*: the renderer as shipped (the map sampled in proportion to its "
         f"texels' power, MIS with BSDF sampling); *bsdf only*: the same with "
-        f"`core.render.environment.NEE = False` (an internal switch, not a job key). "
+        f"`prepare(..., env_nee=False)` (an internal switch of `core.render.frames`, not "
+        f"a job key). "
         f"Relative MSE against a {ref['spp']:.0f}-spp NEE render of another seed, process "
         f"CPU time, medians over seeds; load average {ref['load']:.2f} at the start.\n")
     add(table(rows[1:], [("series", "series", ""), ("spp", "spp", ".0f"),
@@ -919,6 +953,44 @@ def _section_profile(add, d, plots, md, meta) -> None:
                        ("1 lane instead of 4", "one_lane_ns", ".0f"),
                        ("fastmath recompile", "fastmath_ns", ".0f")]))
         add("")
+    _section_profile_scenes(add, d)
+
+
+def _section_profile_scenes(add, d) -> None:
+    rows = d["profile_scenes"]
+    if not rows:
+        return
+    from relray.bench.profile_scenes import SCENES
+
+    scenes = [s for s in SCENES if any(r["scene"] == s for r in rows)]
+    totals = {r["scene"]: r for r in rows if r["stage"] == "total"}
+    t0 = totals[scenes[0]]
+    add(f"### Per scene\n\n`.venv/bin/python -m relray.bench.profile_scenes --size "
+        f"{t0['size']:.0f} --spp {t0['spp']:.0f}` (`bench/results/profile_scenes.csv`): "
+        f"ns of CPU per path in each stage, {t0['size']:.0f}², {t0['spp']:.0f} spp, 1 "
+        "thread, one render each. *cornell*: the box; *heavy*: its displaced-grid floor "
+        "(§3); *environment*: ground, sphere and box lit by a map with a small sun (§5d); "
+        "*textured*: the textured box (§5e); *moving*: the whole room as one velocity "
+        "group (§5b).\n")
+    stages = [r["stage"] for r in rows if r["scene"] == scenes[0] and r["stage"] != "total"]
+    by = {(r["scene"], r["stage"]): r for r in rows}
+    cols = [("stage", "stage", "")] + [
+        (s, (lambda r, s=s: by.get((s, r["stage"]), {}).get("ns_per_path", 0.0)), ".0f")
+        for s in scenes]
+    body = [{"stage": st} for st in stages
+            if any(by.get((s, st), {}).get("ns_per_path", 0.0) > 0.5 for s in scenes)]
+    body.append({"stage": "**total**"})
+    for s in scenes:
+        by[(s, "**total**")] = totals[s]
+    add(table(body, cols))
+    add("\n| | " + " | ".join(scenes) + " |\n|---|" + "---|" * len(scenes))
+    add("| M paths per CPU-second | " + " | ".join(
+        f"{totals[s]['paths_per_cpu_s'] / 1e6:.2f}" for s in scenes) + " |")
+    add("| Embree share % | " + " | ".join(
+        f"{100 * totals[s]['embree_share']:.0f}" for s in scenes) + " |")
+    add("| rays per path | " + " | ".join(
+        f"{totals[s]['rays_per_path']:.2f}" for s in scenes) + " |")
+    add("")
 
 
 def _ns(d, *stages: str) -> float:

@@ -30,6 +30,7 @@ from relray.bench import (
     embree_floor,
     environment,
     first_render,
+    profile_scenes,
     report,
     skips,
     textures,
@@ -38,7 +39,7 @@ from relray.bench import (
 )
 
 SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "environment",
-            "textures", "first", "convergence")
+            "textures", "first", "profiles", "convergence")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -53,6 +54,8 @@ class Plan:
     scale_spp: int = 32
     scale_repeat: int = 3
     heavy_triangles: int = 1_000_000
+    profile_size: int = 128  # the per-scene profiles (bench/profile_scenes.py), 1 thread
+    profile_spp: int = 16
     heavy_size: int = 256
     heavy_spp: int = 16
     heavy_repeat: int = 3
@@ -87,6 +90,7 @@ class Plan:
 
 FULL = Plan("full")
 QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_repeat=1,
+             profile_size=64, profile_spp=4,
              heavy_size=128, heavy_spp=8, heavy_repeat=1, beta_size=48, beta_spp=8,
              beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
              moving_size=64, moving_spp=8, moving_repeat=2, env_size=(48, 32),
@@ -98,6 +102,7 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
                                                 thresholds=[0.1, 0.05], repeats=2,
                                                 ref_factor=8))
 SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repeat=1,
+             profile_size=8, profile_spp=1,
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
              skip_spp=2, skip_ref_spp=4, skip_repeat=1, moving_size=8, moving_spp=2,
@@ -188,7 +193,7 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
     if "skips" in sections:
         section("skips")
         rows = skips.variant_rows(plan.skip_spp, plan.skip_size, plan.skip_size, threads,
-                                  plan.skip_repeat, plan.skip_ref_spp)
+                                  plan.skip_repeat, plan.skip_ref_spp, tmp)
         if plan.anim_frames:
             rows += skips.animation_rows(tmp, plan.anim_frames, plan.anim_separate,
                                          plan.anim_spp, threads)
@@ -221,7 +226,14 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         section("first")
         cm.write_csv(out / "first_render.csv", first_render.rows())
         cm.write_csv(out / "viewport_first.csv", first_render.viewport_rows())
+        cm.write_csv(out / "first_cli.csv", first_render.cli_rows())
         done("first")
+    if "profiles" in sections:
+        section("profiles")
+        cm.write_csv(out / "profile_scenes.csv",
+                     profile_scenes.rows(tmp, plan.profile_spp, plan.profile_size,
+                                         plan.heavy_triangles))
+        done("profiles")
     if "convergence" in sections:
         section("convergence")
         cfg = plan.conv

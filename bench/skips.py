@@ -14,6 +14,17 @@ work the skip avoids:
   background of 1e-6 (a sky light enters the NEE table);
 - BVH once per animation: A one ``relray render`` of a 24-frame fly-by, B one
   ``relray render --frames i-i`` per frame.
+
+The second wave's skips (each B adds the feature so that it does nothing visible):
+
+- no velocity-group traversal without moving bodies: B adds a 1 cm sphere far behind the
+  camera moving at 0.1 c (one velocity group that no ray hits);
+- no texture fetch for untextured materials: B gives every material a 1 × 1 base-colour
+  texture of its own colour (the same picture through the texture path);
+- no environment sampling without a map: B adds a 1 × 1 environment map of radiance
+  1e-6 (the map enters the NEE table and every miss looks it up);
+- no star pass without stars: B adds the Hipparcos stars to magnitude 6 at brightness
+  1e-9 (the star pass splats them, each occlusion-tested, all invisible).
 """
 
 from __future__ import annotations
@@ -27,18 +38,56 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import OpenImageIO as oiio
 
 from relray.bench import common as cm
 
 
-def _variant_jobs() -> dict[str, tuple[Any, Any, dict[str, Any], dict[str, Any]]]:
-    """name -> (job A, job B, render kwargs A, render kwargs B)."""
+def _write_texel(path: Path, rgb: list[float]) -> Path:
+    """A 1 × 1 linear EXR of ``rgb``."""
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(1, 1, 3, oiio.FLOAT))
+    out.write_image(np.asarray(rgb, np.float32).reshape(1, 1, 3))
+    out.close()
+    return path
+
+
+def _second_wave_jobs(tmp: Path) -> dict[str, Any]:
+    """The B jobs of the second wave's skips (module docstring), by row name."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    moving = cm.job_dict()
+    moving["objects"] = [*moving["objects"],
+                         {"name": "speck", "shape": "sphere", "center": [0.0, -50.0, 1.0],
+                          "radius": 0.01, "material": "white", "velocity": [0.1, 0.0, 0.0]}]
+    textured = cm.job_dict()
+    textured["materials"] = [
+        dict(m, base_color_texture=str(_write_texel(tmp / f"skip_{m['name']}.exr",
+                                                    m["base_color"])))
+        for m in textured["materials"]]
+    env = cm.job_dict()
+    env["scene"] = dict(env["scene"], environment={
+        "file": str(_write_texel(tmp / "skip_sky.exr", [1e-6, 1e-6, 1e-6]))})
+    stars = cm.job_dict()
+    stars["scene"] = dict(stars["scene"], stars={"catalog": "hipparcos",
+                                                 "magnitude_limit": 6.0, "brightness": 1e-9})
+    return {"no velocity-group traversal without moving bodies": cm.make_job(moving),
+            "no texture fetch for untextured materials": cm.make_job(textured),
+            "no environment sampling without a map": cm.make_job(env),
+            "no star pass without stars": cm.make_job(stars)}
+
+
+def _variant_jobs(tmp: Path | None = None
+                  ) -> dict[str, tuple[Any, Any, dict[str, Any], dict[str, Any]]]:
+    """name -> (job A, job B, render kwargs A, render kwargs B); ``tmp``: where the
+    second wave's rows write their images (None: those rows are left out)."""
     base = cm.job_dict()
     plain = cm.make_job(base)
     glossy = cm.job_dict()
     glossy["materials"] = [dict(m, metallic=1e-4, transmission=1e-4) for m in base["materials"]]
     sky = cm.job_dict()
     sky["scene"] = dict(sky["scene"], background=[1e-6, 1e-6, 1e-6])
+    second = {} if tmp is None else {name: (plain, job, {}, {})
+                                      for name, job in _second_wave_jobs(tmp).items()}
     return {
         "rgb when Doppler is off": (plain, plain, {"spectral": "cie1931", "doppler": False},
                                     {"spectral": "rgb", "doppler": False}),
@@ -46,14 +95,16 @@ def _variant_jobs() -> dict[str, tuple[Any, Any, dict[str, Any], dict[str, Any]]
                                   {"beta": (0.0, 1e-9, 0.0)}),
         "no glossy/dielectric code": (plain, cm.make_job(glossy), {}, {}),
         "NEE only towards existing lights": (plain, cm.make_job(sky), {}, {}),
+        **second,
     }
 
 
 def variant_rows(spp: int, width: int, height: int, threads: int, repeat: int,
-                 ref_spp: int) -> list[dict[str, Any]]:
-    """The rendered rows of the skip table (module docstring), with error at ``spp``."""
+                 ref_spp: int, tmp: Path | None = None) -> list[dict[str, Any]]:
+    """The rendered rows of the skip table (module docstring), with error at ``spp``;
+    ``tmp``: a folder for the second wave's images (None: without those rows)."""
     rows = []
-    for name, (ja, jb, ka, kb) in _variant_jobs().items():
+    for name, (ja, jb, ka, kb) in _variant_jobs(tmp).items():
         benches = [cm.RelrayBench(ja), cm.RelrayBench(jb) if jb is not ja else None]
         benches[1] = benches[1] or benches[0]
         kws = [dict(ka), dict(kb)]
@@ -102,6 +153,9 @@ def animation_rows(tmp: Path, frames: int, separate: int, spp: int,
     """
     data = cm.job_dict(cm.FLYBY)
     data["scene"] = dict(data["scene"], include=str(cm.REPO / "presets" / "cornell.toml"))
+    # the job moves to ``tmp``: its texture files stay where the preset names them
+    data["materials"] = [{k: str(cm.FLYBY.parent / v) if k.endswith("_texture") else v
+                          for k, v in m.items()} for m in data.get("materials", [])]
     data["render"] = dict(data["render"], spp=spp, threads=threads)
     data["output"] = dict(data["output"], dir=str(tmp / "flyby_out"))
     job = cm.write_job(data, tmp / "flyby_bench.toml")

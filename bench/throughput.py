@@ -36,6 +36,7 @@ from relray.core.render import camera as camera_mod
 from relray.core.render import film as film_mod
 from relray.core.render import frames as render
 from relray.core.render import integrator as integrator_mod
+from relray.core.render import rest_frames as rest_frames_mod
 from relray.core.scene import job as jobmod
 
 # Stage -> the functions timed for it: (module or class, attribute name).  Names that a
@@ -58,6 +59,8 @@ STAGES: dict[str, list[tuple[Any, str]]] = {
     "sensor_values": [(render, "sensor_values")],
     "film add_samples": [(film_mod.Film, "add_samples")],
     "chunk": [(render.FrameRenderer, "_trace_chunk")],
+    "velocity groups": [(rest_frames_mod.MovingScene, "intersect"),
+                        (rest_frames_mod.MovingScene, "occluded")],
 }
 CAMERA_STAGES = ("path keys", "primary rays")
 HERO_STAGES = ("wavelength offsets", "hero inverse CDF", "λ to grid coordinates")
@@ -97,9 +100,10 @@ class StageMeter:
     ``integrator.shade``), so the wrappers see every call.
     """
 
-    def __init__(self, accel: accel_mod.Accel | None = None,
+    def __init__(self, accel: accel_mod.Accel | Sequence[accel_mod.Accel] | None = None,
                  stages: dict[str, list[tuple[Any, str]]] | None = None):
-        self.accel = accel
+        self.accels = [] if accel is None else (
+            [accel] if isinstance(accel, accel_mod.Accel) else list(accel))
         self.stages = STAGES if stages is None else stages
         self.seconds: dict[str, float] = {}
         self.calls: dict[str, int] = {}
@@ -142,10 +146,10 @@ class StageMeter:
         for stage, targets in self.stages.items():
             for owner, name in targets:
                 self._wrap(owner, name, stage)
-        if self.accel is not None:
-            scene = self.accel._scene
-            self.accel._scene = _RunProxy(scene, self)
-            self._undo.append(lambda: setattr(self.accel, "_scene", scene))
+        for acc in self.accels:
+            scene = acc._scene
+            acc._scene = _RunProxy(scene, self)
+            self._undo.append(lambda acc=acc, scene=scene: setattr(acc, "_scene", scene))
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -153,6 +157,15 @@ class StageMeter:
             undo()
         self._undo.clear()
         self._wrapped.clear()
+
+
+def tracer_accels(prep: render.PreparedScene) -> list[accel_mod.Accel]:
+    """Every Embree scene a render traces: the static BVH and each velocity group's."""
+    out = [] if prep.accel is None else [prep.accel]
+    tracer = prep.tracer
+    if isinstance(tracer, rest_frames_mod.MovingScene):
+        out += [g.accel for g in tracer.groups if g.accel is not None]
+    return out
 
 
 def measure_bench(bench: cm.RelrayBench, threads: int, repeat: int = 3,
@@ -170,7 +183,7 @@ def measure_bench(bench: cm.RelrayBench, threads: int, repeat: int = 3,
     rows = []
     for _ in range(repeat):
         load = cm.load_average()[0]
-        with StageMeter(prep.accel, STAGES if profile else {}) as m:
+        with StageMeter(tracer_accels(prep), STAGES if profile else {}) as m:
             with cm.timed() as t:
                 film, stats = fr.render(ev, 1)
         embree = m.seconds.get("embree run intersect", 0.0) + m.seconds.get(
@@ -209,7 +222,9 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
     """Exclusive stage rows (CPU seconds, share of the CPU time) of a profiled measurement.
 
     Nested timers are subtracted: "Embree wrappers" is intersect + occluded - run (the
-    numpy in accel.py); "trace: other" is trace - Embree calls - shade - add_shadows
+    numpy in accel.py); "velocity groups" is MovingScene's queries - the Embree calls in
+    them (the rest-frame rays and the merge of the groups' hits); "trace: other" is
+    trace - Embree calls - velocity groups - shade - add_shadows
     (buffers); "chunk: other" is chunk - trace - camera - hero - film (the inline numpy
     left in ``_trace_chunk``: D⁵, repeat/tile, AOVs); "outside chunks" is the process CPU
     time - chunk (thread pool, tiles, adaptive passes, other threads of the process).
@@ -224,6 +239,9 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
     run_i, run_o = g("embree run intersect"), g("embree run occluded")
     calls = g("embree intersect", "embree occluded")
     inner = g(*CAMERA_STAGES, *HERO_STAGES, *FILM_STAGES)
+    # MovingScene's queries call the Embree wrappers inside them (static scenes call
+    # them directly from trace): its own work is its time less theirs
+    moving = max(g("velocity groups") - calls, 0.0) if g("velocity groups") else 0.0
     rows = [
         ("Embree intersect (run)", run_i),
         ("Embree occluded (run)", run_o),
@@ -231,8 +249,9 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
         ("shade kernel", g("shade")),
         ("add_shadows kernel", g("add_shadows")),
         ("area-light kernel (scenes with area lights)", g("area lights")),
-        ("trace: other (buffers)", g("trace") - calls - g("shade", "add_shadows",
-                                                          "area lights")),
+        ("velocity groups: rest-frame rays, merge", moving),
+        ("trace: other (buffers)", g("trace") - calls - moving
+         - g("shade", "add_shadows", "area lights")),
         *((f"camera: {n}", g(n)) for n in CAMERA_STAGES),
         *((f"hero: {n}", g(n)) for n in HERO_STAGES),
         *((f"film: {n}", g(n)) for n in FILM_STAGES),

@@ -39,7 +39,9 @@ from .render.frames import RenderCancelled
 from .runner import render_job
 from .scene import job as jobmod
 from .scene import schema as schemamod
+from .scene.geometry import build_scene
 from .scene.motion import camera_settings, frame_events
+from .scene.spectral_model import AUTO, resolve
 
 EXIT_FRAMES_FAILED = 1
 EXIT_USER_ERROR = 2
@@ -255,6 +257,9 @@ def cmd_info(args: argparse.Namespace) -> int:
     events = frame_events(job)
     check_frame_names(job)
     print(jobmod.job_summary(job))
+    if job.render.spectral == AUTO:
+        model, why = resolve(job, build_scene(job))
+        print(f"spectral    auto renders with {model} ({why})")
     cam = camera_settings(job)
     pin = PinholeCamera.from_settings(cam, job.render.width, job.render.height)
     cols, rows = np.meshgrid(np.linspace(0, job.render.width, 33),

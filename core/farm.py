@@ -113,6 +113,7 @@ from .resources import usable_cores
 from .scene.description import AUTO_EXPOSURE, Job
 from .scene.geometry import build_scene
 from .scene.motion import resolve_camera
+from .scene.spectral_model import resolved_job
 
 DEFAULT_SCHEDULER_PORT = 8786
 DEFAULT_CONNECT_TIMEOUT = 10.0
@@ -481,8 +482,11 @@ def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
     :func:`task_threads`). Frames fail alone: see :class:`FarmResult`.
     """
     reporter = reporter if reporter is not None else Reporter()
-    resolve_camera(job, build_scene(job))  # user errors here, before any task
+    scene = build_scene(job)
+    resolve_camera(job, scene)  # user errors here, before any task
     plan = plan_frames(job, overwrite)
+    job = resolved_job(job, scene)  # render.spectral = "auto" (after the plan's digests)
+    del scene
     threads = threads or job.render.threads
     run_id = uuid.uuid4().hex
     result = FarmResult(skipped=plan.done)

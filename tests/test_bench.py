@@ -65,7 +65,7 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     run.run(run.SMOKE, out, md, use_cycles=cycles_anchor.bpy_available(), log=lambda *a: None)
     for name in ("throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
                  "velocity_groups", "convergence_medians", "equal_error", "adaptive_gain",
-                 "shade_breakdown", "environment_nee",
+                 "shade_breakdown", "environment_nee", "profile_scenes",
                  *(("embree_floor",) if embree_floor.library() is not None else ())):
         rows = common.read_csv(out / f"{name}.csv")
         assert rows, name
@@ -80,13 +80,26 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     assert (out / "convergence.png").exists() and (out / "profile.png").exists()
     text = md.read_text()
     assert "## Headline" in text and "## 6. Profile" in text and "## 5b. Moving" in text
-    assert "## 5d. Environment maps" in text
+    assert "## 5d. Environment maps" in text and "### Per scene" in text
+    prof = common.read_csv(out / "profile_scenes.csv")
+    assert {r["scene"] for r in prof} == {"cornell", "heavy", "environment", "textured",
+                                         "moving"}
+    moving = {r["stage"]: r for r in prof if r["scene"] == "moving"}
+    assert moving["velocity groups: rest-frame rays, merge"]["seconds"] > 0.0
+    assert all(r["ns_per_path"] > 0.0 for r in prof if r["stage"] == "total")
     groups = {r["variant"]: r for r in common.read_csv(out / "velocity_groups.csv")}
     assert [groups[f"{n} groups"]["groups"] for n in (0, 1, 2, 4, 8)] == [0, 1, 2, 4, 8]
     assert groups["0 groups"]["over_static"] == 1.0
     # the report regenerates from the CSVs alone
     report.write(out, tmp_path / "again.md")
     assert "## 5. Skip" in (tmp_path / "again.md").read_text()
-    assert set(skips._variant_jobs()) <= {r["skip"] for r in
-                                          common.read_csv(out / "skips.csv")}
+    skip_rows = {r["skip"]: r for r in common.read_csv(out / "skips.csv")}
+    assert set(skips._variant_jobs(tmp_path / "skip_images")) <= set(skip_rows)
+    for name in ("no velocity-group traversal without moving bodies",
+                 "no texture fetch for untextured materials",
+                 "no environment sampling without a map", "no star pass without stars"):
+        assert skip_rows[name]["B_over_A"] > 0.0, name
+    # B's environment map enters the NEE table: one light more than A
+    env = skip_rows["no environment sampling without a map"]
+    assert env["lights_B"] == env["lights_A"] + 1
     assert convergence.ConvergenceConfig().ref_spp == 16 * 256

@@ -48,6 +48,33 @@ def write_map(path, rgb_bottom_first: np.ndarray):
     return path
 
 
+def write_spectral_map(path, nm, bands_bottom_first, extra=()):
+    """A spectral EXR in the Fichet et al. 2021 layout: channel ``S0.<λ>nm`` (decimal
+    comma) per wavelength of ``nm``, the cube given bottom row first (H, W, B); ``extra``
+    adds (name, value) channels of a constant value (e.g. R, G, B to be ignored)."""
+    cube = np.asarray(bands_bottom_first, np.float32)[::-1]
+    h, w, b = cube.shape
+    names = ["S0." + f"{lam:.6f}".replace(".", ",") + "nm" for lam in nm]
+    planes = [cube[..., k] for k in range(b)] + [np.full((h, w), v, np.float32)
+                                                for _, v in extra]
+    names += [n for n, _ in extra]
+    spec = oiio.ImageSpec(w, h, len(names), oiio.FLOAT)
+    spec.channelnames = tuple(names)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec)
+    assert out.write_image(np.ascontiguousarray(np.stack(planes, axis=2)))
+    out.close()
+    return path
+
+
+def planck_map(T: float, h: int, w: int, n: int = 400) -> tuple[np.ndarray, np.ndarray]:
+    """(wavelengths, cube): B(λ, T) / B(550 nm, T) at n wavelengths log-spaced over
+    150 nm – 12 µm, the same in every texel."""
+    nm = np.geomspace(150.0, 12000.0, n)
+    values = spectrum.planck(nm, T) / spectrum.planck(550.0, T)
+    return nm, np.broadcast_to(values, (h, w, n))
+
+
 def direction_of(u: float, v: float, rot_deg: float = 0.0) -> np.ndarray:
     """The contract's direction of map coordinates (u, v)."""
     phi = math.pi - 2.0 * math.pi * u + math.radians(rot_deg)
@@ -131,27 +158,35 @@ def test_marker_appears_where_the_contract_says(tmp_path, rot, beta):
 # ------------------------------------------------------------------------ furnace
 
 
-@pytest.mark.parametrize("mode", ["rgb", "cie1931"])
+@pytest.mark.parametrize("mode", ["rgb", "cie1931", "spectral"])
 def test_furnace_convex_body_is_rho_times_l(tmp_path, mode):
     """A diffuse sphere of albedo ρ = 0.5 in a uniform map of radiance L: every pixel on
     it is ρ·L in expectation (a convex body sees only the map: one bounce, depth 2), and
     the map seen directly is L. In cie1931 L is the texel's RGB-emitter spectrum, its Y
-    computed here (emitter_spectrum); the grey reflectance is exactly 0.5.
+    computed here (emitter_spectrum); the grey reflectance is exactly 0.5. "spectral": a
+    spectral EXR of a 4000 K blackbody (cie1931), L its Y computed here from Planck's law
+    (the map's 400 bands are linearly interpolated: < 1e-4 relative in the visible).
     Tolerance: per pixel |z| ≤ 6 with σ from the film's rel_error, and the mean z over
     the body's pixels within 5/√N (a 1 % bias would fail it)."""
     rgb = np.array([0.8, 0.6, 0.3])
     W, H = 32, 32
+    nm, cube = planck_map(4000.0, 8, 16)
     job = env_job(tmp_path, np.broadcast_to(rgb, (8, 16, 3)),
                   render={"width": W, "height": H, "spp": 16, "max_depth": 2,
-                          "spectral": mode},
+                          "spectral": "cie1931" if mode == "spectral" else mode},
                   camera={"position": [0.0, -4.0, 0.0], "look_at": [0.0, 0.0, 0.0],
                           "fov": 40.0},
                   materials=[GREY],
                   objects=[{"shape": "sphere", "center": [0.0, 0.0, 0.0], "radius": 1.0,
                             "subdivisions": 5, "material": "grey"}])
+    if mode == "spectral":
+        write_spectral_map(tmp_path / "sky.exr", nm, cube)
     r = render(job, tmp_path)
     if mode == "rgb":
         L = rgb[1]
+    elif mode == "spectral":
+        L = sensor_of(lambda lam: spectrum.planck(lam, 4000.0) / spectrum.planck(550.0, 4000.0),
+                      np.ones(1))[0, 1]
     else:
         L = sensor_of(lambda lam: emitter_spectrum(rgb, lam), np.ones(1))[0, 1]
     Y, sig = r.luminance, r.sigma_y
@@ -235,6 +270,140 @@ def test_moving_camera_sees_d5_l_lab_of_d_lambda(tmp_path):
     assert np.all(np.abs(z) <= 6.0), np.abs(z).max()
     assert abs(z.sum()) <= 5.0 * math.sqrt(z.size), z.mean()
     assert expected.max() / expected.min() > 3.0
+
+
+def test_blackbody_environment_seen_moving_is_b_of_dt(tmp_path):
+    """A spectral map of a 5000 K blackbody (B(λ, T)/B(550 nm, T) in every texel, 400
+    bands over 150 nm – 12 µm) seen from a camera at β = (0.4, 0.3, 0): every pixel's
+    spectral-exr bands (250–2450 nm, 200 nm wide, camera frame) are the band means of
+    B(λ, D·T)/B(550 nm, T) averaged over the pixel, D = 1/(γ(1 − β·d')) from 0.86 to 1.67
+    across the image (physics.md: D⁵ B(Dλ, T) = B(λ, D·T)); Planck's law evaluated here.
+
+    Statistics: K = 16 independent renders (seeds); per pixel and band the mean and its
+    standard error from the K values, z = (mean − expected)/√(sem² + (ε·expected)²), ε
+    the largest relative error of the map's linear interpolation of Planck's law over
+    the wavelengths looked up (measured here). Every |z| below the Student-t quantile
+    (K − 1 degrees of freedom) of a family-wise false-alarm rate of 1e-3 over all values,
+    and the mean z within 5 of its standard error. Without the searchlight factor (D⁴)
+    the pixels are 10–50 % dark, without Doppler the infrared bands several times off."""
+    from scipy import stats
+    W, H, fov, K, T = 16, 12, 60.0, 16, 5000.0
+    beta = [0.4, 0.3, 0.0]
+    bands = [250.0, 2450.0, 200.0]
+    nm, cube = planck_map(T, 4, 8)
+    write_spectral_map(tmp_path / "sky.exr", nm, cube, extra=(("R", 1.0), ("G", 1.0),
+                                                              ("B", 1.0)))
+    runs = []
+    for seed in range(K):
+        job = base_job(scene={"background": [0.0, 0.0, 0.0],
+                              "environment": {"file": "sky.exr"}},
+                       render={"width": W, "height": H, "spp": 256, "seed": seed,
+                               "doppler": True, "searchlight": True},
+                       output={"formats": ["spectral-exr"], "spectral_bands": bands},
+                       camera={"fov": fov}, motion={"beta": beta},
+                       materials=[GREY], objects=[FAR_SPECK])
+        r = render(job, tmp_path)
+        runs.append(r.image.spectral.astype(np.float64))
+    S = np.stack(runs)                       # (K, H, W, nb)
+    centres = r.image.band_centers_nm
+    axes = camera_axes([0, 0, 0], [0, 1, 0], [0, 0, 1])
+    k = (np.arange(40) + 0.5) / 40.0
+    b550 = spectrum.planck(550.0, T)
+
+    def band_means(d):
+        D = doppler(d, beta)[..., None, None]
+        lam = centres[:, None] + (k - 0.5) * bands[2]
+        return _planck_dt(lam, D * T).mean(axis=-1) / b550
+
+    expected, _ = pixel_average(band_means, W, H, fov, axes, n_sub=8)   # (H, W, nb)
+    D_all = doppler(directions_of_image(W, H, fov, axes), beta)
+    assert 0.8 < D_all.min() < 0.9 and 1.6 < D_all.max() < 1.7
+    lam_seen = np.geomspace(D_all.min() * bands[0] * 0.99, D_all.max() * bands[1] * 1.01, 4000)
+    interp = np.interp(lam_seen, nm, cube[0, 0])
+    eps = float(np.max(np.abs(interp / (spectrum.planck(lam_seen, T) / b550) - 1.0)))
+    assert eps < 5e-3
+    mean = S.mean(axis=0)
+    sem = S.std(axis=0, ddof=1) / math.sqrt(K)
+    assert np.all(sem > 0.0)
+    z = (mean - expected) / np.sqrt(sem**2 + (eps * expected) ** 2)
+    limit = stats.t.ppf(1.0 - 1e-3 / (2 * z.size), K - 1)
+    assert np.all(np.abs(z) <= limit), (np.abs(z).max(), limit)
+    t_sd = math.sqrt((K - 1) / (K - 3))      # the standard deviation of Student's t
+    assert abs(z.mean()) <= 5.0 * t_sd / math.sqrt(z.size), z.mean()
+    # the test can tell: D⁴ instead of D⁵, or the rest-frame 5000 K, are far outside
+    assert np.abs((mean / mean_doppler(W, H, fov, axes, beta)[..., None] - expected)
+                  / np.sqrt(sem**2 + (eps * expected) ** 2)).max() > 5 * limit
+
+
+def _planck_dt(lam: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """B(λ, T) for arrays of temperatures (broadcast), Planck's law written here."""
+    h, c, kb = 6.62607015e-34, 299792458.0, 1.380649e-23
+    lam_m = lam * 1e-9
+    return 2.0 * h * c * c / lam_m**5 / np.expm1(h * c / (lam_m * kb * T)) * 1e-9
+
+
+def directions_of_image(W, H, fov, axes) -> np.ndarray:
+    """Unit camera-frame directions through a 4 × 4 sub-grid of every pixel."""
+    from render_helpers import directions, ndc
+    u = (np.arange(4) + 0.5) / 4
+    cols = np.arange(W)[None, :, None, None] + u[None, None, None, :]
+    rows = np.arange(H)[:, None, None, None] + u[None, None, :, None]
+    cols, rows = np.broadcast_arrays(cols, rows)
+    return directions(*ndc(cols, rows, W, H, fov), axes)
+
+
+def mean_doppler(W, H, fov, axes, beta) -> np.ndarray:
+    """Each pixel's mean Doppler factor."""
+    return pixel_average(lambda d: doppler(d, beta), W, H, fov, axes, n_sub=8)[0]
+
+
+def test_spectral_map_is_read_in_the_fichet_layout(tmp_path):
+    """Channels S0.<λ><unit> in any order and unit (nm, um, THz: λ = c/ν) are the bands,
+    sorted by wavelength; R, G, B beside them are ignored; rows come bottom first."""
+    from relray.core.scene import sky
+    h, w = 2, 3
+    names = ["G", "S0.0,7um", "S0.400nm", "R", "S0.599,584916THz"]  # 700, 400, 500 nm
+    data = np.zeros((h, w, len(names)), np.float32)
+    for k in range(len(names)):
+        data[..., k] = k + 10 * np.arange(h)[::-1, None]   # file's top row: the larger
+    spec = oiio.ImageSpec(w, h, len(names), oiio.FLOAT)
+    spec.channelnames = tuple(names)
+    out = oiio.ImageOutput.create(str(tmp_path / "s.exr"))
+    assert out.open(str(tmp_path / "s.exr"), spec)
+    assert out.write_image(data)
+    out.close()
+    write_map(tmp_path / "rgb.exr", np.ones((2, 4, 3)))
+    for name, want in (("s.exr", True), ("rgb.exr", False)):
+        env = parse_job(base_job(scene={"environment": {"file": name}}, materials=[GREY],
+                                 objects=[FAR_SPECK]), tmp_path / "job.toml").scene.environment
+        image = sky.load_environment(env, tmp_path / "job.toml")
+        assert image.spectral is want
+    image = sky.load_environment(
+        parse_job(base_job(scene={"environment": {"file": "s.exr"}}, materials=[GREY],
+                           objects=[FAR_SPECK]), tmp_path / "job.toml").scene.environment,
+        tmp_path / "job.toml")
+    assert np.allclose(image.wavelengths_nm, [400.0, 500.0, 700.0], rtol=1e-6)
+    assert np.array_equal(image.pixels[0, 0], [2.0, 4.0, 1.0])    # bottom row
+    assert np.array_equal(image.pixels[1, 0], [12.0, 14.0, 11.0])
+
+
+def test_band_value_interpolates_and_is_zero_outside():
+    nm = np.array([400.0, 500.0, 700.0])
+    tex = np.array([[[1.0, 3.0, 2.0]]], np.float32)
+    got = [environment.band_value(tex, 0, 0, nm, lam) for lam in
+           (399.0, 400.0, 450.0, 500.0, 650.0, 700.0, 701.0)]
+    assert got == pytest.approx([0.0, 1.0, 2.0, 3.0, 2.25, 2.0, 0.0])
+
+
+def test_an_infrared_only_map_is_still_sampled():
+    """A texel that shines only outside the visible (Y = 0) keeps a positive sampling
+    weight (environment.SPECTRAL_FLOOR), so NEE covers it."""
+    from relray.core.scene.sky import EnvironmentImage
+    nm = np.array([2000.0, 3000.0])
+    px = np.zeros((2, 2, 2), np.float32)
+    px[1, 0] = [1.0, 1.0]
+    w = environment.texel_weights(EnvironmentImage(px, 1.0, 0.0, nm))
+    assert w[1, 0] > 0.0 and np.count_nonzero(w) == 1
 
 
 def test_uniform_map_equals_the_constant_sky_on_a_moving_body(tmp_path):
@@ -360,7 +529,7 @@ def test_bilinear_lookup_of_the_map_seen_directly():
     def value(u, v):
         d = direction_of(u, v)
         q = environment.env_bilinear(ke.tex, ke.rot, *d)
-        return np.array([environment.env_lane_bilinear(ke.tex, q, j, True, 0.0, 1.0)
+        return np.array([environment.env_lane_bilinear(ke.tex, q, j, True, 0.0, 1.0, ke.nm)
                          for j in range(3)])
 
     assert np.allclose(value(2.5 / 8, 1.5 / 4), rgb[1, 2], atol=1e-4)
@@ -439,9 +608,16 @@ material = "grey"
 """
 
 
-@pytest.mark.parametrize("case", ["missing", "empty", "nan", "negative strength"])
+@pytest.mark.parametrize("case", ["missing", "empty", "nan", "negative strength",
+                                  "one band", "spectral nan", "same wavelength"])
 def test_bad_environment_is_one_line_exit_2_nothing_written(tmp_path, case):
     file, strength = "sky.exr", "1.0"
+    spectral = {"one band": ([500.0], [1.0]), "spectral nan": ([500.0, 600.0], [1.0, np.nan]),
+                "same wavelength": ([500.0, 600.0], [1.0, 1.0])}
+    if case in spectral:  # "same wavelength": S0.500,000000nm and S0.0,5um
+        nm, values = spectral[case]
+        write_spectral_map(tmp_path / "sky.exr", nm, np.broadcast_to(values, (2, 4, len(nm))),
+                           extra=(("S0.0,5um", 1.0),) if case == "same wavelength" else ())
     if case == "empty":  # a 0×0 Radiance HDR (libpng prints its own line for a 0×0 PNG)
         (tmp_path / "sky.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 0 +X 0\n")
         file = "sky.hdr"

@@ -92,3 +92,15 @@ def test_an_empty_image_is_refused_in_one_line(tmp_path, capfd):
     with pytest.raises(UserError, match="empty"):
         images.read_image(path, key="k", file=tmp_path / "job.toml")
     assert capfd.readouterr().err == ""
+
+
+def test_fichet_channel_names_give_wavelengths():
+    """Fichet et al. 2021 emissive channels: decimal comma, length or frequency units."""
+    from relray.core.scene.images import fichet_wavelength_nm
+    assert fichet_wavelength_nm("S0.550,000000nm") == 550.0
+    assert fichet_wavelength_nm("S0.1,5um") == 1500.0
+    assert fichet_wavelength_nm("S0.600THz") == pytest.approx(499.654097, rel=1e-9)
+    assert fichet_wavelength_nm("S0.0Hz") is None
+    assert fichet_wavelength_nm("S1.550nm") is None
+    assert fichet_wavelength_nm("S0.550nmx") is None
+    assert fichet_wavelength_nm("R") is None

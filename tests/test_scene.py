@@ -440,3 +440,30 @@ def test_textured_mesh_without_uvs_warns_once(tmp_path: Path, caplog) -> None:
     warnings = [r.getMessage() for r in caplog.records if "no texture coordinates" in
                 r.getMessage()]
     assert len(warnings) == 1 and "objects[0]" in warnings[0]
+
+
+PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+            "property float z\nproperty float s\nproperty float t\n")
+PLY_VERTS = "0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n0 0 1 0.5 0.5\n"
+
+
+@pytest.mark.parametrize(("faces", "smooth"), [
+    ("element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+     + PLY_VERTS + "3 0 1 2\n3 0 2 4\n", False),            # the PLY parser alone
+    ("element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+     + PLY_VERTS + "3 0 1 2\n3 0 2 4\n", True),             # a Trimesh: vertex normals
+    ("element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+     + PLY_VERTS + "4 0 1 2 3\n", False),                   # a quad: triangulated
+])
+def test_ply_read_fast_or_through_trimesh_gives_the_same_mesh(tmp_path: Path, faces, smooth):
+    """_trimesh_arrays reads a triangle PLY with trimesh's parser alone and anything
+    else through trimesh.load_mesh: the faces, vertices and UVs agree with load_mesh."""
+    import trimesh
+    path = tmp_path / "m.ply"
+    path.write_text(PLY_HEAD + faces)
+    f, v, n, uv = scene._trimesh_arrays(path, smooth)
+    ref = trimesh.load_mesh(str(path), process=False)
+    assert np.array_equal(f, ref.faces) and np.array_equal(v, ref.vertices)
+    assert f.shape[1] == 3 and len(f) == 2
+    assert np.allclose(uv, ref.visual.uv)
+    assert (n is not None) == smooth

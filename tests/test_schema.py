@@ -50,14 +50,14 @@ def test_vocabularies_come_from_the_description():
     def choices(model, name):
         return schema._resolve(model, (name,)).choices
 
-    assert choices(schema.Render, "spectral") == description.SPECTRAL_MODES
+    assert choices(schema.Render, "spectral") == description.SPECTRAL_CHOICES
     assert choices(schema.Motion, "mode") == description.MOTION_MODES
     assert schema._resolve(schema.Output, ("formats", 0)).choices == description.OUTPUT_FORMATS
     assert schema._resolve(schema.Output, ("aovs", 0)).choices == description.AOV_NAMES
     assert tuple(schema.OBJECT_MODELS) == description.SHAPES
     assert tuple(schema.LIGHT_MODELS) == description.LIGHT_TYPES
     props = schema.json_schema()["$defs"]["Render"]["properties"]
-    assert props["spectral"]["enum"] == list(description.SPECTRAL_MODES)
+    assert props["spectral"]["enum"] == list(description.SPECTRAL_CHOICES)
 
 
 def test_json_schema_has_every_key_with_a_description():
@@ -139,7 +139,7 @@ def _error(tmp_path: Path, text: str) -> UserError:
     ("[render]\nwidth = 40000\n", "render.width", "must be <= 32768 (got 40000)"),
     ("[camera]\nfov = 0\n", "camera.fov", "must be > 0 (got 0)"),
     ("[render]\nspectral = 'cie1964'\n", "render.spectral",
-     "'cie1964' is not one of cie1931, seed-gaussian, rgb (did you mean 'cie1931'?)"),
+     "'cie1964' is not one of cie1931, seed-gaussian, rgb, auto (did you mean 'cie1931'?)"),
     ("[[lights]]\ntype = 'lazer'\n", "lights[0].type",
      "'lazer' is not one of point, spot, sun, area"),
     ("[[lights]]\npower = 3\n", "lights[0].type", "missing: one of point, spot, sun, area"),

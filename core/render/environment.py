@@ -30,9 +30,23 @@ emission table looked up at the lane's lab column (:data:`KernelEnvironment.row`
 An escaping ray's lanes are lab wavelengths, so the camera sees D⁵ L_lab(D λ), the
 aberration coming from the lab direction.
 
+Spectral maps (a Fichet-layout spectral EXR, :func:`..scene.images.read_spectral_image`):
+texel t holds lab spectral radiance L_t,b at the file's wavelengths λ_b (× strength,
+clamped to ≥ 0), in the units of ``emission_spectrum``, and
+
+    L_t(λ) = L_t,b + (λ − λ_b)/(λ_b+1 − λ_b) · (L_t,b+1 − L_t,b)   for λ_b ≤ λ ≤ λ_b+1,
+
+0 outside [λ_0, λ_B−1] (as ``emission_spectrum``'s table, but interpolated exactly at the
+lane's wavelength). The kernels read the bands (``tex`` (H, W, B)) and their wavelengths
+(:data:`KernelEnvironment.nm`, empty for a colour map). In the rgb mode the map becomes
+its rest-frame Rec.709 colour, Σ_b L_t,b · rgb(hat_b) (:func:`band_rgb`). A blackbody map,
+L_t = B(λ, T), is seen by a camera with Doppler factor D as D⁵ B(Dλ, T) = B(λ, D·T).
+
 Importance sampling (next-event estimation): piecewise constant over texels, the
 probability of texel t proportional to its power, Y_t ΔΩ_t (Y the Rec.709 luminance of
-its rgb, ΔΩ_t = (2π/W)(cos θ_top − cos θ_bottom) its solid angle): a row from the
+its rgb, ΔΩ_t = (2π/W)(cos θ_top − cos θ_bottom) its solid angle; a spectral texel adds
+:data:`SPECTRAL_FLOOR` · Ȳ · mean_b L_t,b · ΔΩ_t, Ȳ = ∫ ȳ dλ, so a texel that shines only
+outside the visible, where a moving camera may see it, is sampled too): a row from the
 marginal CDF over rows, a column from that row's conditional CDF, (u, v) uniform inside
 the texel. The density per unit (u, v) is p_t·H·W and dΩ = 2π² sin θ du dv, so
 
@@ -44,8 +58,8 @@ direction the map lights, which MIS needs to stay unbiased (no uniform mix is ne
 a bilinear lookup would need one, since it spreads a texel's light into neighbours of
 weight 0). A map that is black everywhere is no light (power 0).
 
-:data:`NEE` (internal switch for ``bench/environment.py``, not a job key): False leaves
-the map out of the light table, so it is reached by BSDF sampling only.
+``prepare(..., env_nee=False)`` (:mod:`.frames`; ``bench/environment.py``, not a job key)
+leaves the map out of the light table, so it is reached by BSDF sampling only.
 """
 
 from __future__ import annotations
@@ -60,9 +74,10 @@ from ..physics import spectrum
 from ..physics.rgb_table import coefficients, lambda_of_column, sigmoid_reflectance
 from ..scene.sky import EnvironmentImage
 
-#: Next-event estimation samples the map (False: BSDF sampling only; benchmarks).
-NEE = True
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance weights
+#: A spectral texel's sampling weight beside its luminance: this share of its mean band
+#: radiance (× Ȳ), so bands outside the visible are sampled (module docstring).
+SPECTRAL_FLOOR = 0.01
 TWO_PI_SQ = 2.0 * math.pi * math.pi
 
 
@@ -76,14 +91,35 @@ class KernelEnvironment(NamedTuple):
     pmf: np.ndarray    # float32 (H, W): probability of each texel
     rot: float         # rotation_z in radians
     row: int           # the emission-table row of E(λ) (rgb: ones)
+    nm: np.ndarray     # float64 (B,): a spectral map's band wavelengths (colour map: empty)
 
 
 def texel_rgb(image: EnvironmentImage) -> np.ndarray:
     """The map's linear Rec.709 radiance per texel, float64 (H, W, 3), × strength,
-    negative components clamped to 0 (a grey image gives its value on all three)."""
+    negative components clamped to 0 (a grey image gives its value on all three; a
+    spectral map its bands' rest-frame colour, :func:`band_rgb`)."""
+    if image.spectral:
+        return np.clip(texel_bands(image) @ band_rgb(image.wavelengths_nm), 0.0, None)
     px = np.asarray(image.pixels, np.float64)
     rgb = px[..., :3] if px.shape[2] >= 3 else np.repeat(px[..., :1], 3, axis=2)
     return np.clip(rgb, 0.0, None) * image.strength
+
+
+def texel_bands(image: EnvironmentImage) -> np.ndarray:
+    """A spectral map's band radiance × strength, clamped to ≥ 0, float64 (H, W, B)."""
+    return np.clip(np.asarray(image.pixels, np.float64), 0.0, None) * image.strength
+
+
+def band_rgb(nm: np.ndarray) -> np.ndarray:
+    """(B, 3): the rest-frame linear Rec.709 (cie1931 sensor) of each band's hat function
+    (1 at λ_b, falling linearly to 0 at its neighbours), so Σ_b L_b · band_rgb[b] is the
+    colour of the interpolated spectrum."""
+    out = np.zeros((len(nm), 3))
+    for b in range(len(nm)):
+        one = np.zeros(len(nm))
+        one[b] = 1.0
+        out[b] = spectrum.rgb_of(spectrum.tabulated(nm, one))
+    return out
 
 
 def solid_angles(height: int, width: int) -> np.ndarray:
@@ -98,6 +134,18 @@ def texel_power(rgb: np.ndarray) -> np.ndarray:
     """Y_t ΔΩ_t per texel (H, W): the sampling weights and the map's power."""
     h, w = rgb.shape[:2]
     return (rgb @ LUMA) * solid_angles(h, w)[:, None]
+
+
+def texel_weights(image: EnvironmentImage) -> np.ndarray:
+    """The sampling weight of each texel (H, W): Y_t ΔΩ_t, plus a spectral texel's
+    :data:`SPECTRAL_FLOOR` term (module docstring)."""
+    power = texel_power(texel_rgb(image))
+    if image.spectral:
+        h, w = power.shape
+        y_flat = float(spectrum.y_of(np.ones(spectrum.GRID_N, np.float32)))
+        power = power + (SPECTRAL_FLOOR * y_flat * texel_bands(image).mean(axis=2)
+                         * solid_angles(h, w)[:, None])
+    return power
 
 
 def distribution(power: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -150,7 +198,7 @@ def base_row(mode: str) -> np.ndarray:
 def power_estimate(image: EnvironmentImage, radius: float) -> float:
     """The map's power through the scene's bounding sphere, Σ Y_t ΔΩ_t · π r² (as the
     constant sky's L · 4π · π r²): its share in light selection."""
-    return float(texel_power(texel_rgb(image)).sum()) * math.pi * radius * radius
+    return float(texel_weights(image).sum()) * math.pi * radius * radius
 
 
 def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> KernelEnvironment:
@@ -159,11 +207,15 @@ def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> K
     if image is None:
         return KernelEnvironment(False, np.zeros((1, 1, 4), np.float32), np.array([0.0, 1.0]),
                                  np.array([[0.0, 1.0]]), np.zeros((1, 1), np.float32), 0.0,
-                                 max(row, 0))
-    rgb = texel_rgb(image)
-    marg, cond, pmf = distribution(texel_power(rgb))
-    return KernelEnvironment(True, texel_table(rgb, mode), marg, cond, pmf,
-                             math.radians(image.rotation_z), row)
+                                 max(row, 0), np.zeros(0))
+    marg, cond, pmf = distribution(texel_weights(image))
+    if image.spectral and mode != "rgb":
+        tex = texel_bands(image).astype(np.float32)
+        nm = np.asarray(image.wavelengths_nm, np.float64)
+    else:
+        tex, nm = texel_table(texel_rgb(image), mode), np.zeros(0)
+    return KernelEnvironment(True, tex, marg, cond, pmf, math.radians(image.rotation_z), row,
+                             nm)
 
 
 # ------------------------------------------------------------------ device functions
@@ -212,26 +264,41 @@ def env_bilinear(tex, rot, x, y, z):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def env_lane_bilinear(tex, q, j, rgb, lamu, base):
+def env_lane_bilinear(tex, q, j, rgb, lamu, base, nm):
     """:func:`env_lane` interpolated over the texels ``q`` of :func:`env_bilinear`."""
     r0, r1, c0, c1, fy, fx = q
-    a = (1.0 - fx) * env_lane(tex, r0, c0, j, rgb, lamu, base) \
-        + fx * env_lane(tex, r0, c1, j, rgb, lamu, base)
-    b = (1.0 - fx) * env_lane(tex, r1, c0, j, rgb, lamu, base) \
-        + fx * env_lane(tex, r1, c1, j, rgb, lamu, base)
+    a = (1.0 - fx) * env_lane(tex, r0, c0, j, rgb, lamu, base, nm) \
+        + fx * env_lane(tex, r0, c1, j, rgb, lamu, base, nm)
+    b = (1.0 - fx) * env_lane(tex, r1, c0, j, rgb, lamu, base, nm) \
+        + fx * env_lane(tex, r1, c1, j, rgb, lamu, base, nm)
     return (1.0 - fy) * a + fy * b
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def env_lane(tex, r, c, j, rgb, lamu, base):
-    """The radiance of texel (r, c) for lane j: rgb mode its channel j, else
-    k · s(λ; c) · E with λ the lane's lab wavelength (table column ``lamu``) and
-    ``base`` = E(λ) (the emission row at lamu)."""
+def env_lane(tex, r, c, j, rgb, lamu, base, nm):
+    """The radiance of texel (r, c) for lane j: rgb mode its channel j, a spectral map
+    (``nm`` not empty) its bands interpolated at the lane's lab wavelength λ (table
+    column ``lamu``), else k · s(λ; c) · E with ``base`` = E(λ) (the emission row at
+    lamu)."""
     if rgb:
         return np.float64(tex[r, c, j])
+    if nm.shape[0] > 0:
+        return band_value(tex, r, c, nm, lambda_of_column(lamu))
     return (np.float64(tex[r, c, 3]) * base
             * sigmoid_reflectance(tex[r, c, 0], tex[r, c, 1], tex[r, c, 2],
                                   lambda_of_column(lamu)))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def band_value(tex, r, c, nm, lam):
+    """Texel (r, c)'s spectral radiance at λ (nm): its bands at ``nm`` interpolated
+    linearly, 0 outside [nm[0], nm[-1]] (module docstring)."""
+    n = nm.shape[0]
+    if not (nm[0] <= lam <= nm[n - 1]):
+        return 0.0
+    k = min(max(np.searchsorted(nm, lam), 1), n - 1)
+    f = (lam - nm[k - 1]) / (nm[k] - nm[k - 1])
+    return (1.0 - f) * np.float64(tex[r, c, k - 1]) + f * np.float64(tex[r, c, k])
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")

@@ -30,6 +30,7 @@ from ..physics import relativity, spectrum
 from ..scene.description import Job, RenderSettings
 from ..scene.geometry import Scene, build_scene
 from ..scene.motion import resolve_camera
+from ..scene.spectral_model import resolved_job
 from . import environment
 from .accel import MISS_DISTANCE, Accel
 from .camera import PinholeCamera
@@ -90,9 +91,10 @@ def _bounding_radius(triangles: np.ndarray, origin: np.ndarray) -> float:
     return float(np.sqrt((corners**2).sum(1).max())) * 1.001 + 1e-9
 
 
-def prepare(scene: Scene, mode: str) -> PreparedScene:
+def prepare(scene: Scene, mode: str, env_nee: bool = True) -> PreparedScene:
     """Build the BVHs (the static scene's and one per velocity group), the spectral tables
-    and the light table of ``scene``.
+    and the light table of ``scene`` (``env_nee`` False: the environment map is no light
+    of next-event estimation, reached by BSDF sampling only; for benchmarks).
 
     The area lights' quads (``scene.light_triangles``, the last static triangles) are in
     no BVH: they are lights, not geometry (as in Cycles), so they block no ray; the kernel
@@ -129,7 +131,7 @@ def prepare(scene: Scene, mode: str) -> PreparedScene:
     env_row = (tables.add_emission_row(environment.base_row(mode)) if env_image is not None
                else -1)
     env_power = (environment.power_estimate(env_image, radius)
-                 if env_image is not None and environment.NEE else 0.0)
+                 if env_image is not None and env_nee else 0.0)
     lights = build_lights(scene, tables, origin, geom["area"].astype(np.float64), radius,
                           env_power)
     tracer: Accel | MovingScene | None = accel
@@ -410,12 +412,14 @@ def body_doppler(tracer: MovingScene, d_lab: np.ndarray, seg: np.ndarray) -> np.
 
 
 def build_renderer(job: Job, scene: Scene | None = None,
-                   threads: int | None = None) -> FrameRenderer:
-    """A :class:`FrameRenderer` for ``job`` (scene, BVH, tables); ``threads`` overrides."""
+                   threads: int | None = None, env_nee: bool = True) -> FrameRenderer:
+    """A :class:`FrameRenderer` for ``job`` (scene, BVH, tables); ``threads`` overrides;
+    ``env_nee``: :func:`prepare`'s."""
     scene = scene if scene is not None else build_scene(job)
+    job = resolved_job(job, scene)  # render.spectral = "auto"
     cam = resolve_camera(job, scene)
     s = job.render if threads is None else replace(job.render, threads=int(threads))
-    prep = prepare(scene, s.spectral)
+    prep = prepare(scene, s.spectral, env_nee)
     bands = job.output.spectral_bands if "spectral-exr" in job.output.formats else None
     return FrameRenderer(prep, s, PinholeCamera.from_settings(cam, s.width, s.height),
                          aovs=job.output.aovs, bands=bands)

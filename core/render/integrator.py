@@ -199,6 +199,7 @@ class KernelScene(NamedTuple):
     env_pmf: np.ndarray   # float32 (H, W): probability of each texel
     env_rot: float        # rotation_z, radians
     env_row: int          # emission row of E(λ) (D65_ext; rgb mode: ones)
+    env_nm: np.ndarray    # float64 (B,): a spectral map's band wavelengths (else empty)
     tex: TextureTable    # image textures and UVs (:mod:`.textures`; none: ``no_textures``)
 
 
@@ -285,19 +286,43 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
         mat_rgb, bool(env.on), np.ascontiguousarray(env.tex, np.float32),
         np.ascontiguousarray(env.marg, np.float64), np.ascontiguousarray(env.cond, np.float64),
         np.ascontiguousarray(env.pmf, np.float32), float(env.rot), int(env.row),
+        np.ascontiguousarray(env.nm, np.float64),
         no_textures(len(tables.mat_alpha)) if textures is None else textures)
 
 
 def triangle_geometry(triangles: np.ndarray, origin: np.ndarray) -> dict[str, np.ndarray]:
-    """v0, edges, unit geometric normal and area of each triangle (local coordinates)."""
-    t = np.asarray(triangles, np.float64) - origin
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    c = np.cross(e1, e2)
-    norm = np.linalg.norm(c, axis=1)
-    ng = c / np.maximum(norm, 1e-300)[:, None]
-    f = np.float32
-    return {"v0": t[:, 0].astype(f), "e1": e1.astype(f), "e2": e2.astype(f),
-            "ng": ng.astype(f), "area": (0.5 * norm).astype(f)}
+    """v0, edges, unit geometric normal and area of each triangle (local coordinates):
+    with t = vertex − origin in float64, e1 = t1 − t0, e2 = t2 − t0, c = e1 × e2,
+    ng = c/|c| (0 for |c| = 0), area = |c|/2, each stored as float32."""
+    t = np.ascontiguousarray(triangles, np.float64)
+    n = len(t)
+    out = {k: np.empty((n, 3), np.float32) for k in ("v0", "e1", "e2", "ng")}
+    out["area"] = np.empty(n, np.float32)
+    _triangle_geometry(t, np.asarray(origin, np.float64), out["v0"], out["e1"], out["e2"],
+                       out["ng"], out["area"])
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _triangle_geometry(t, origin, v0, e1, e2, ng, area):
+    for i in range(t.shape[0]):
+        p0x, p0y, p0z = t[i, 0, 0] - origin[0], t[i, 0, 1] - origin[1], t[i, 0, 2] - origin[2]
+        ax = (t[i, 1, 0] - origin[0]) - p0x
+        ay = (t[i, 1, 1] - origin[1]) - p0y
+        az = (t[i, 1, 2] - origin[2]) - p0z
+        bx = (t[i, 2, 0] - origin[0]) - p0x
+        by = (t[i, 2, 1] - origin[1]) - p0y
+        bz = (t[i, 2, 2] - origin[2]) - p0z
+        v0[i, 0], v0[i, 1], v0[i, 2] = p0x, p0y, p0z
+        e1[i, 0], e1[i, 1], e1[i, 2] = ax, ay, az
+        e2[i, 0], e2[i, 1], e2[i, 2] = bx, by, bz
+        cx = ay * bz - az * by
+        cy = az * bx - ax * bz
+        cz = ax * by - ay * bx
+        norm = math.sqrt(cx * cx + cy * cy + cz * cz)
+        inv = 1.0 / max(norm, 1e-300)
+        ng[i, 0], ng[i, 1], ng[i, 2] = cx * inv, cy * inv, cz * inv
+        area[i] = 0.5 * norm
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -553,7 +578,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
      s_beam, _, s_mat_rgb, s_env_on, s_env_tex, s_env_marg, s_env_cond, s_env_pmf, s_env_rot,
-     s_env_row, s_tex) = sc
+     s_env_row, s_env_nm, s_tex) = sc
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
      t_mat_flag, t_nscale, t_estr, t_trans, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65,
      t_rgb, t_on, _, _) = s_tex
@@ -599,13 +624,13 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * env_lane_bilinear(
                             s_env_tex, q_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
                 else:
                     r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * w * env_lane(
                             s_env_tex, r_e, c_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]))
+                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
@@ -811,7 +836,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     lu = lamu[pi, j] + lshift
                     sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
                         * env_lane(s_env_tex, r_e, c_e, j, rgb_lanes, lu,
-                                   lerp_at(s_emit, s_env_row, lu, top))
+                                   lerp_at(s_emit, s_env_row, lu, top), s_env_nm)
                 if moving:
                     so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
                     so, sd, st = shadow_ray_from(so, target, wi, False)

@@ -38,10 +38,13 @@ MAX_ABS_NUMBER = 1e15
 #: ``output.exposure``: a number of stops, or this word (metered per frame, smoothed over
 #: the animation: :mod:`..output.exposure`).
 AUTO_EXPOSURE = "auto"
+#: ``render.spectral``: a model, or "auto" (core/scene/spectral_model.py picks one)
+SPECTRAL_CHOICES = (*SPECTRAL_MODES, "auto")
 #: Exposures (given, or metered) lie within ±this many stops.
 MAX_EXPOSURE_STOPS = 64.0
 
-__all__ = ["SPECTRAL_MODES", "OUTPUT_FORMATS", "AOV_NAMES", "DEFAULT_AOVS", "AOV_COMPONENTS",
+__all__ = ["SPECTRAL_MODES", "SPECTRAL_CHOICES", "OUTPUT_FORMATS", "AOV_NAMES", "DEFAULT_AOVS",
+           "AOV_COMPONENTS",
            "aov_components", "MOTION_MODES", "SHAPES",
            "LIGHT_TYPES", "STAR_CATALOGUES", "MAX_ABS_NUMBER", "AUTO_EXPOSURE",
            "MAX_EXPOSURE_STOPS", "frozen",

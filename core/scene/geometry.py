@@ -207,15 +207,8 @@ def _read_mesh_file(params: dict, key: str, job_file: Path) -> Mesh:
             triangles = triangles @ back.T
             normals = normals @ back.T if normals is not None else None
         return triangles, normals, gl.uvs
-    import trimesh  # slow to import: only when a job has a mesh
-
     try:
-        mesh = trimesh.load_mesh(str(path), process=False)
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        vertex_normals = np.asarray(mesh.vertex_normals) if params["smooth"] else None
-        visual_uv = getattr(getattr(mesh, "visual", None), "uv", None)
-        uv = None if visual_uv is None else np.asarray(visual_uv, dtype=np.float64)
+        faces, vertices, vertex_normals, uv = _trimesh_arrays(path, params["smooth"])
     except Exception as e:  # trimesh raises many kinds of error for a bad file
         raise UserError(f"cannot read mesh file {path}: {type(e).__name__}: {e}", key=key,
                         file=job_file) from None
@@ -235,6 +228,34 @@ def _read_mesh_file(params: dict, key: str, job_file: Path) -> Mesh:
                             "(NaN or inf)", key=key, file=job_file)
     return (vertices[faces], vertex_normals[faces] if vertex_normals is not None else None,
             uvs)
+
+
+def _trimesh_arrays(path: Path, smooth: bool
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """(faces int64 (F, 3), vertices float64 (V, 3), vertex normals or None, per-vertex UVs
+    or None) of a .ply/.obj/.stl file, through trimesh.
+
+    A triangle PLY without ``smooth`` is read by trimesh's PLY parser alone
+    (``trimesh.exchange.ply.load_ply``: milliseconds for a million triangles); building a
+    ``Trimesh`` (``load_mesh``: its caches and copies, about 100× longer) is left to
+    the files that need it: vertex normals, polygons to triangulate, other formats.
+    """
+    import trimesh  # slow to import: only when a job has a mesh
+
+    if path.suffix.lower() == ".ply" and not smooth:
+        with open(path, "rb") as f:
+            kw = trimesh.exchange.ply.load_ply(f)
+        faces = np.asarray(kw.get("faces", np.zeros((0, 3))))
+        if faces.ndim == 2 and faces.shape[1] == 3:
+            uv = getattr(kw.get("visual"), "uv", None)
+            return (faces.astype(np.int64, copy=False),
+                    np.asarray(kw["vertices"], dtype=np.float64), None,
+                    None if uv is None else np.asarray(uv, dtype=np.float64))
+    mesh = trimesh.load_mesh(str(path), process=False)
+    visual_uv = getattr(getattr(mesh, "visual", None), "uv", None)
+    return (np.asarray(mesh.faces, dtype=np.int64), np.asarray(mesh.vertices, dtype=np.float64),
+            np.asarray(mesh.vertex_normals) if smooth else None,
+            None if visual_uv is None else np.asarray(visual_uv, dtype=np.float64))
 
 
 def tessellate(obj: ObjectSpec, key: str, job_file: Path) -> Mesh:
@@ -295,26 +316,67 @@ def _drop_degenerate(
     the triangles kept.
 
     Tested on float32 vertices relative to the bounding-box centre of the finite
-    triangles: what the accelerator stores.
+    triangles: what the accelerator stores. A triangle with edges e1, e2 (float64 from
+    those float32 vertices) is kept when |e1 × e2| > DEGENERATE_TOL · (|e1|² + |e2|²)
+    and |e1 × e2| > 0 (one compiled pass, :func:`_kept_triangles`).
     """
-    with np.errstate(invalid="ignore", over="ignore"):
-        finite = np.all(np.isfinite(triangles), axis=(1, 2))
-        if finite.any():
-            pts = triangles[finite].reshape(-1, 3)
-            centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
-        else:
-            centre = np.zeros(3)
-        t = (triangles - centre).astype(np.float32).astype(np.float64)
-        finite &= np.all(np.isfinite(t), axis=(1, 2))
-    t = np.where(finite[:, None, None], t, 0.0)
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    cross = np.linalg.norm(np.cross(e1, e2), axis=1)
-    scale = (e1 * e1).sum(axis=1) + (e2 * e2).sum(axis=1)
-    keep = finite & (cross > DEGENERATE_TOL * scale) & (cross > 0.0)
+    tris = np.ascontiguousarray(triangles, np.float64)
+    keep = _kept_triangles(tris, _finite_centre(tris), DEGENERATE_TOL)
     if not keep.all():
         triangles, material_ids = triangles[keep], material_ids[keep]
         normals = normals[keep] if normals is not None else None
     return triangles, normals, material_ids, keep
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _finite_centre(tris):
+    """The centre of the bounding box of the triangles whose vertices are all finite
+    (the origin when none is)."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(tris.shape[0]):
+        ok = True
+        for k in range(3):
+            for a in range(3):
+                if not np.isfinite(tris[i, k, a]):
+                    ok = False
+        if ok:
+            for k in range(3):
+                for a in range(3):
+                    lo[a] = min(lo[a], tris[i, k, a])
+                    hi[a] = max(hi[a], tris[i, k, a])
+    if not lo[0] <= hi[0]:
+        return np.zeros(3)
+    return 0.5 * (lo + hi)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _kept_triangles(tris, centre, tol):
+    """:func:`_drop_degenerate`'s test per triangle, on float32(vertex − centre)."""
+    n = tris.shape[0]
+    keep = np.empty(n, np.bool_)
+    v = np.empty((3, 3))
+    for i in range(n):
+        ok = True
+        for k in range(3):
+            for a in range(3):
+                x = tris[i, k, a]
+                r = np.float64(np.float32(x - centre[a]))
+                if not (np.isfinite(x) and np.isfinite(r)):
+                    ok = False
+                v[k, a] = r
+        if not ok:
+            keep[i] = False
+            continue
+        e1x, e1y, e1z = v[1, 0] - v[0, 0], v[1, 1] - v[0, 1], v[1, 2] - v[0, 2]
+        e2x, e2y, e2z = v[2, 0] - v[0, 0], v[2, 1] - v[0, 1], v[2, 2] - v[0, 2]
+        cx = e1y * e2z - e1z * e2y
+        cy = e1z * e2x - e1x * e2z
+        cz = e1x * e2y - e1y * e2x
+        cross = math.sqrt(cx * cx + cy * cy + cz * cz)
+        scale = e1x * e1x + e1y * e1y + e1z * e1z + e2x * e2x + e2y * e2y + e2z * e2z
+        keep[i] = cross > tol * scale and cross > 0.0
+    return keep
 
 
 def _check_nothing_vanished(keep: np.ndarray, named_parts: Sequence[tuple[str, int]],
@@ -526,9 +588,24 @@ def _count_unresolved(triangles: np.ndarray) -> int:
     """Triangles whose longest edge is below the ray offset (see the module docstring)."""
     pts = triangles.reshape(-1, 3)
     eps = ray_offset(float(np.max(pts.max(axis=0) - pts.min(axis=0))))
-    edges = triangles - np.roll(triangles, 1, axis=1)
-    longest = np.sqrt((edges * edges).sum(axis=2)).max(axis=1)
-    return int(np.count_nonzero(longest < eps))
+    return int(_count_shorter(np.ascontiguousarray(triangles, np.float64), eps))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _count_shorter(tris, eps):
+    """How many triangles have all three edges shorter than ``eps``."""
+    count = 0
+    for i in range(tris.shape[0]):
+        longest = 0.0
+        for k in range(3):
+            j = (k + 2) % 3
+            dx = tris[i, k, 0] - tris[i, j, 0]
+            dy = tris[i, k, 1] - tris[i, j, 1]
+            dz = tris[i, k, 2] - tris[i, j, 2]
+            longest = max(longest, math.sqrt(dx * dx + dy * dy + dz * dz))
+        if longest < eps:
+            count += 1
+    return count
 
 
 def _concatenate(parts: list[_Part]

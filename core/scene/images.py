@@ -25,11 +25,20 @@ texel's row index grows with v, as Blender's UV origin (0, 0) at the bottom-left
 Limits: at most :data:`MAX_TEXELS` texels per image (checked from the header, before any
 pixel is read); the caller stores :data:`BYTES_PER_TEXEL` bytes per texel of up to four
 float32 channels.
+
+Spectral images (:func:`read_spectral_image`): an OpenEXR file in the layout of Fichet et
+al. 2021 ("An OpenEXR layout for spectral images", JCGT 10(3)), whose emissive channels
+``S0.<value><unit>`` hold spectral radiance at one wavelength each (the value with a
+decimal comma, e.g. ``S0.550,000000nm``, the layout relray's own ``spectral-exr`` output
+writes; units nm, um, mm, m or, as frequencies, Hz … PHz with λ = c/ν). Other channels
+(RGB, polarisation ``S1``–``S3``, reflective ``T``) are ignored. Values are linear;
+at most :data:`MAX_SPECTRAL_VALUES` float32 values in all.
 """
 
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -44,6 +53,12 @@ MAX_TEXELS = 2**27
 """Largest image accepted: 134 M texels (16384 × 8192), 2 GiB as float32 RGBA."""
 BYTES_PER_TEXEL = 16
 """Memory of one stored texel: four float32 channels (fewer channels are padded)."""
+MAX_SPECTRAL_VALUES = 2**29
+"""Largest spectral image accepted: texels × bands ≤ 2^29 (2 GiB as float32)."""
+SPEED_OF_LIGHT = 299792458.0  # m/s: a frequency band's wavelength λ = c/ν
+_FICHET = re.compile(r"^S0\.(\d+(?:,\d*)?)(nm|um|mm|m|Hz|kHz|MHz|GHz|THz|PHz)$")
+_NM_PER_UNIT = {"nm": 1.0, "um": 1e3, "mm": 1e6, "m": 1e9}
+_HZ_PER_UNIT = {"Hz": 1.0, "kHz": 1e3, "MHz": 1e6, "GHz": 1e9, "THz": 1e12, "PHz": 1e15}
 
 Encoding = Literal["auto", "srgb", "linear"]
 _ENCODINGS = ("auto", "srgb", "linear")
@@ -71,7 +86,20 @@ class Image:
         return int(self.pixels.shape[2])
 
 
-_MEMO: dict[tuple, Image] = {}
+@dataclass(frozen=True, eq=False)
+class SpectralImage:
+    """Spectral radiance of one Fichet-layout EXR (module docstring).
+
+    ``pixels``: float32 (H, W, B), band b at ``wavelengths_nm[b]`` (increasing, > 0),
+    row 0 = the bottom row of the picture.
+    """
+
+    pixels: np.ndarray
+    wavelengths_nm: np.ndarray
+    path: Path
+
+
+_MEMO: dict[tuple, Image | SpectralImage | None] = {}
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -106,6 +134,81 @@ def read_image(path: Path | str, *, key: str, file: Path | str | None,
         image = Image(_read_pixels(resolved, key, file, encoding), resolved)
         _MEMO[memo_key] = image
     return image
+
+
+def fichet_wavelength_nm(name: str) -> float | None:
+    """The wavelength (nm) of a Fichet 2021 emissive channel name (``S0.550,000000nm``:
+    550; ``S0.600THz``: c/600 THz = 499.65), None for any other channel."""
+    m = _FICHET.match(name)
+    if m is None:
+        return None
+    value = float(m.group(1).replace(",", "."))
+    unit = m.group(2)
+    if unit in _NM_PER_UNIT:
+        return value * _NM_PER_UNIT[unit]
+    hz = value * _HZ_PER_UNIT[unit]
+    return SPEED_OF_LIGHT / hz * 1e9 if hz > 0.0 else None
+
+
+def read_spectral_image(path: Path | str, *, key: str, file: Path | str | None,
+                        base: Path | None = None) -> SpectralImage | None:
+    """The spectral radiance of ``path`` if it is a Fichet-layout spectral EXR (module
+    docstring), else None (then :func:`read_image` reads its colour).
+
+    Raises :class:`UserError` naming ``key`` and ``file`` for a missing or unreadable file,
+    an empty image, fewer than two bands or two at one wavelength, more than
+    :data:`MAX_SPECTRAL_VALUES` values, or NaN/infinite values. Negative values are kept
+    (the caller clamps radiance).
+    """
+    resolved = resolve_path(path, base, key, file)
+    check_readable(resolved, key, file)
+    info = os.stat(resolved)
+    memo_key = (str(resolved), info.st_size, info.st_mtime_ns, "spectral")
+    if memo_key not in _MEMO:
+        _MEMO[memo_key] = _read_spectral(resolved, key, file)
+    image = _MEMO[memo_key]
+    return image if isinstance(image, SpectralImage) else None
+
+
+def _read_spectral(path: Path, key: str, file: Path | str | None) -> SpectralImage | None:
+    if png_size(path) is not None:
+        return None
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise UserError(f"{path}: cannot read the image ({_oiio_error()})", key=key, file=file)
+    try:
+        spec = inp.spec()
+        names = list(spec.channelnames)
+        bands = [(lam, k) for k, name in enumerate(names)
+                 if (lam := fichet_wavelength_nm(name)) is not None]
+        if not bands:
+            return None
+        w, h = spec.width, spec.height
+        if w <= 0 or h <= 0:
+            raise UserError(f"{path}: the image is empty ({w}×{h})", key=key, file=file)
+        if len(bands) < 2:
+            raise UserError(f"{path}: a spectral image needs at least 2 bands (S0.<λ> "
+                            f"channels), it has {len(bands)}", key=key, file=file)
+        bands.sort()
+        lam = np.array([b[0] for b in bands])
+        if np.any(np.diff(lam) <= 0.0):
+            raise UserError(f"{path}: two spectral channels are at the same wavelength",
+                            key=key, file=file)
+        if w * h * len(bands) > MAX_SPECTRAL_VALUES:
+            raise UserError(f"{path}: {w}×{h} texels × {len(bands)} bands is more than "
+                            f"{MAX_SPECTRAL_VALUES} values", key=key, file=file)
+        pixels = inp.read_image(0, 0, 0, len(names), oiio.FLOAT)
+        if pixels is None or getattr(pixels, "size", 0) != w * h * len(names):
+            raise UserError(f"{path}: cannot read the image's pixels ({_oiio_error(inp)})",
+                            key=key, file=file)
+    finally:
+        inp.close()
+    cube = np.asarray(pixels, np.float32).reshape(h, w, len(names))[..., [b[1] for b in bands]]
+    if not np.all(np.isfinite(cube)):
+        bad = int(np.count_nonzero(~np.isfinite(cube)))
+        raise UserError(f"{path}: the image has {bad} NaN or infinite values",
+                        key=key, file=file)
+    return SpectralImage(np.ascontiguousarray(cube[::-1]), lam, path)
 
 
 def png_size(path: Path) -> tuple[int, int] | None:

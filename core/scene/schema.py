@@ -78,7 +78,7 @@ from .description import (
     MOTION_MODES,
     OUTPUT_FORMATS,
     SHAPES,
-    SPECTRAL_MODES,
+    SPECTRAL_CHOICES,
     STAR_CATALOGUES,
 )
 
@@ -349,8 +349,10 @@ class Render(Table):
         0.0, description="Adaptive sampling: a pixel stops below this relative error; 0 = off.")
     max_depth: _int(1, MAX_DEPTH) = Field(8, description="Path segments.")
     seed: _int(0, MAX_SEED) = Field(0, description="Random seed (a 64-bit integer).")
-    spectral: _choice(SPECTRAL_MODES) = Field(
-        "cie1931", description="Spectral model (physics.md).")
+    spectral: _choice(SPECTRAL_CHOICES) = Field(
+        "cie1931", description="Spectral model (physics.md); \"auto\": rgb when nothing "
+                               "shifts wavelengths (doppler = false, or nothing moves in any "
+                               "frame), else cie1931 (README, \"Spectral models\").")
     doppler: Bool = Field(True, description="false: wavelengths are not shifted (geometry "
                                             "only).")
     searchlight: Bool = Field(True, description="D^5 spectral radiance transform.")
@@ -555,8 +557,11 @@ class Environment(Table):
     needs: ClassVar[str] = "an environment needs its image file"
     file: Annotated[Str, AfterValidator(_nonblank)] = Field(
         description="Equirectangular (lat-long) image, relative to the job: EXR/HDR linear, "
-                    "PNG/JPEG/TIFF sRGB-encoded; texels are linear Rec.709 radiance. Top row "
-                    "+Z, column u along azimuth pi - 2 pi u from +X towards +Y (Blender's "
+                    "PNG/JPEG/TIFF sRGB-encoded; texels are linear Rec.709 radiance. A "
+                    "spectral EXR (Fichet et al. 2021 layout: channels S0.<wavelength><unit>, "
+                    "as spectral-exr output writes) gives lab spectral radiance per texel, "
+                    "interpolated linearly between its wavelengths and 0 outside them. Top "
+                    "row +Z, column u along azimuth pi - 2 pi u from +X towards +Y (Blender's "
                     "Environment Texture).")
     strength: NonNegative = Field(1.0, description="Radiance scale.")
     rotation_z: Number = Field(0.0, description="Degrees: turns the map about +Z (adds to "
