@@ -28,6 +28,10 @@ The task model
   The scene, BVH and spectral tables are built once per worker process and run
   (:func:`worker_renderer`). Before rendering, a task checks again whether its frame is
   done, so a task that is re-run after its frame was written renders nothing twice.
+  With ``output.exposure = "auto"`` a frame's PNG needs the meter readings of the frames
+  before it (:mod:`.output.exposure`), so the task resolves its frame and returns the
+  image instead, and the client writes the frames in frame order through one exposure
+  chain (:class:`_FramesInOrder`): the same exposures, files and resume as a local run.
 - **A still** (exactly one frame to render): the frame's samples are split into
   ``batches`` ranges [s_k, s_k+1) (:func:`sample_batches`), one task each
   (:func:`render_batch_task`), which returns its :class:`~.film.Film`. The client merges
@@ -91,10 +95,13 @@ from .output.digest import frame_digest, job_digest
 from .output.frame_files import (
     FramePlan,
     check_frame_names,
+    exposure_chain,
     frame_is_done,
     frame_stem,
     plan_frames,
+    resolve_film,
     write_film,
+    write_image,
 )
 from .output.imageio import frame_paths
 from .physics.relativity import ShutterEvent
@@ -274,10 +281,13 @@ def _user_errors_returned(task: Callable[..., Any]) -> Callable[..., Any]:
 @_user_errors_returned
 def render_frame_task(job: Job, run_id: str, frame: int, event: ShutterEvent, threads: int,
                       overwrite: bool, slots: Mapping[str, int] | None = None,
-                      digest: str | None = None) -> dict[str, Any]:
+                      digest: str | None = None, write: bool = True) -> dict[str, Any]:
     """Worker: render one frame and write its files; returns paths and timings.
 
     ``digest`` is the client's resume digest of the frame: checked and recorded as is.
+    ``write`` False (``output.exposure = "auto"``): the frame is resolved but not written;
+    its :class:`~.render.film.FilmImage` travels back as ``"image"`` and the client
+    writes it in frame order (:func:`_render_frames`).
     """
     if not overwrite and frame_is_done(job, frame, event, digest):
         return {"frame": frame, "paths": _frame_files(job, frame), "seconds": 0.0,
@@ -285,6 +295,9 @@ def render_frame_task(job: Job, run_id: str, frame: int, event: ShutterEvent, th
     renderer = worker_renderer(job, run_id, task_threads(threads, slots))
     film, stats = renderer.render(event, frame)
     d_range = (stats.d_min, stats.d_max)
+    if not write:
+        return {"frame": frame, "image": resolve_film(frame, film, renderer.to_rgb),
+                "seconds": stats.seconds, "d_range": d_range, "skipped": False}
     paths, exposure = write_film(job, frame, event, film, renderer.to_rgb, stats.seconds,
                                  d_range, digest)
     return {"frame": frame, "paths": [str(p) for p in paths], "seconds": stats.seconds,
@@ -456,27 +469,14 @@ def _message(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
-def check_auto_exposure(job: Job, plan: FramePlan) -> None:
-    """``output.exposure = "auto"`` with more than one frame to render is a user error on
-    Dask: its moving average needs the frames written in order (:mod:`.output.exposure`)."""
-    if job.output.exposure == AUTO_EXPOSURE and len(plan.todo) > 1:
-        raise UserError(
-            f"\"{AUTO_EXPOSURE}\" smooths the exposure over the frames in order, which a "
-            f"farm renders side by side ({len(plan.todo)} frames to render): render them "
-            "without --workers/--scheduler, or give a number of stops",
-            key="output.exposure", file=job.path)
-
-
 def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
                    reporter: Reporter | None = None, threads: int = 0,
                    batches: int = STILL_BATCHES, scheduler: str | None = None,
                    workers: int | None = None) -> FarmResult:
     """Render the job's frames that are not done on the cluster of ``client``.
 
-    ``output.exposure = "auto"`` needs the frames written in order (its moving average,
-    :mod:`.output.exposure`): with more than one frame to render it is a user error; a
-    single frame (a still, or the last one left) reads the range's earlier frames'
-    readings from their files as a local run does.
+    ``output.exposure = "auto"``: the frames render side by side and the client writes
+    them in frame order, so each gets the exposure of a local run (:func:`_render_frames`).
 
     ``threads`` is each task's render threads (0: the worker decides, see
     :func:`task_threads`). Frames fail alone: see :class:`FarmResult`.
@@ -487,7 +487,6 @@ def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
     plan = plan_frames(job, overwrite)
     job = resolved_job(job, scene)  # render.spectral = "auto" (after the plan's digests)
     del scene
-    check_auto_exposure(job, plan)
     threads = threads or job.render.threads
     run_id = uuid.uuid4().hex
     result = FarmResult(skipped=plan.done)
@@ -498,24 +497,106 @@ def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
         _render_still(job, client, plan.todo[0], ranges, run_id, threads, reporter, result)
     else:
         reporter.start(job, plan, "dask", len(plan.todo), "frame", scheduler, workers)
-        _render_frames(job, client, plan.todo, run_id, threads, overwrite, reporter, result)
+        _render_frames(job, client, plan.todo, run_id, threads, overwrite, reporter, result,
+                       plan)
     return result
+
+
+@dataclass
+class _FramesInOrder:
+    """``output.exposure = "auto"`` on Dask: frames render side by side and arrive in any
+    order; the client writes each one once every frame of the plan before it has been
+    settled, through the run's one :func:`~.output.frame_files.exposure_chain`.
+
+    The chain meets the readings in frame order, exactly as in a local run (the frames
+    done in an earlier run give their recorded readings), so every frame gets the stops a
+    local render of the job gives it. The exposure only scales the PNG; the EXR is the
+    worker's scene-referred image either way. A frame waiting for an earlier one is held
+    in the client's memory (tasks are prioritised in frame order, so about one frame per
+    worker); an interrupted run loses the held frames, which a rerun renders again. A
+    frame that failed to render has no reading, so the frames after it are not written
+    either (failed, naming it): their exposure depends on its reading, and writing them
+    without it would give a rerun different exposures from an uninterrupted run.
+    """
+
+    job: Job
+    frames: list[int]
+    """The run's range (the chain's frames, :attr:`FramePlan.frames`)."""
+    todo: list[tuple[int, ShutterEvent]]
+    digests: Mapping[int, str]
+    reporter: Reporter
+    result: FarmResult
+    queue: list[int] = field(default_factory=list)
+    held: dict[int, dict[str, Any] | None] = field(default_factory=dict)
+    blocked_by: int | None = None
+
+    def __post_init__(self) -> None:
+        self.queue = sorted(f for f, _ in self.todo)
+        self.events = dict(self.todo)
+        self.chain = exposure_chain(self.job, self.frames)
+
+    def settle(self, frame: int, out: dict[str, Any] | None) -> None:
+        """Frame ``frame`` arrived (``out``) or failed (None, already reported); write
+        every frame whose turn has come."""
+        self.held[frame] = out
+        while self.queue and self.queue[0] in self.held:
+            f = self.queue.pop(0)
+            got = self.held.pop(f)
+            if got is None:
+                self.blocked_by = f if self.blocked_by is None else self.blocked_by
+            elif self.blocked_by is not None:
+                self.result.failed[f] = (
+                    f"not written: its auto exposure needs the reading of frame "
+                    f"{self.blocked_by}, which failed (a rerun renders both)")
+                self.reporter.error(f, self.result.failed[f], kind="frame")
+            elif got["skipped"]:
+                self._done(f, [Path(p) for p in got["paths"]], 0.0, None, None)
+            else:
+                self._write(f, got)
+
+    def _write(self, frame: int, got: dict[str, Any]) -> None:
+        try:
+            paths, exposure = write_image(self.job, frame, self.events[frame], got["image"],
+                                          got["seconds"], got["d_range"],
+                                          self.digests[frame], self.chain)
+        except UserError as e:  # the client writes: an output folder gone read-only, say
+            self.result.user_errors.add(frame)
+            self.result.failed[frame] = str(e)
+            self.reporter.error(frame, str(e), kind="user")
+            return
+        self._done(frame, paths, got["seconds"], got["d_range"], exposure)
+
+    def _done(self, frame: int, paths: list[Path], seconds: float,
+              d_range: tuple[float, float] | None, exposure: Any) -> None:
+        self.result.written += paths
+        self.result.rendered.append(frame)
+        self.reporter.frame_done(frame, [str(p) for p in paths], seconds, d_range, exposure)
 
 
 def _render_frames(job: Job, client: Any, todo: list[tuple[int, ShutterEvent]], run_id: str,
                    threads: int, overwrite: bool, reporter: Reporter,
-                   result: FarmResult) -> None:
+                   result: FarmResult, plan: FramePlan | None = None) -> None:
+    """Submit a task per frame of ``todo`` and report each as it arrives. ``plan``: the
+    run's plan (its range and resume digests); without it, the range is ``todo``'s
+    frames and the digests are computed here."""
     from distributed import as_completed
 
     slots = host_slots(client)
-    base = job_digest(job)
+    if plan is not None:
+        frames, digests = plan.frames, plan.digests
+    else:
+        base = job_digest(job)
+        frames = sorted(f for f, _ in todo)
+        digests = {f: frame_digest(job, f, ev, base) for f, ev in todo}
+    in_order = (_FramesInOrder(job, frames, todo, digests, reporter, result)
+                if job.output.exposure == AUTO_EXPOSURE else None)
     frame_of: dict[str, int] = {}
     futures = []
     for i, (frame, ev) in enumerate(todo):
         key = f"relray-frame-{frame}-{run_id}"
         frame_of[key] = frame
         futures.append(client.submit(render_frame_task, job, run_id, frame, ev, threads,
-                                     overwrite, slots, frame_digest(job, frame, ev, base),
+                                     overwrite, slots, digests[frame], in_order is None,
                                      key=key, pure=False, retries=TASK_RETRIES,
                                      priority=-i))
     pending = as_completed(futures, loop=client.loop)
@@ -534,13 +615,18 @@ def _render_frames(job: Job, client: Any, todo: list[tuple[int, ShutterEvent]], 
                 reporter.advance(1)
                 reporter.error(frame, result.failed[frame],
                                kind="user" if frame in result.user_errors else "frame")
+                if in_order is not None:
+                    in_order.settle(frame, None)
                 continue
             finally:
                 with contextlib.suppress(Exception):
                     fut.release()
+            reporter.advance(1)
+            if in_order is not None:
+                in_order.settle(frame, out)
+                continue
             result.written += [Path(p) for p in out["paths"]]
             result.rendered.append(frame)
-            reporter.advance(1)
             reporter.frame_done(frame, out["paths"], out["seconds"], out["d_range"],
                                 out.get("exposure"))
     except BaseException:
@@ -622,7 +708,6 @@ def render(job: Job, *, scheduler: str | None = None, workers: int = 0,
     reporter = reporter if reporter is not None else Reporter()
     t0 = time.perf_counter()
     check_frame_names(job)  # a bad name is one line before any cluster starts
-    check_auto_exposure(job, plan_frames(job, overwrite))
     with dask_client(scheduler, workers, connect_timeout, job.path) as client:
         n_workers = len(client.scheduler_info().get("workers", {})) if scheduler else workers
         result = render_on_dask(job, client, overwrite=overwrite, reporter=reporter,
@@ -641,7 +726,7 @@ def with_render_threads(job: Job, threads: int) -> Job:
 
 __all__ = [
     "DEFAULT_CONNECT_TIMEOUT", "STILL_BATCHES", "FarmResult", "SchedulerLostError",
-    "TaskUserError", "check_auto_exposure", "close_quietly", "dask_client", "host_slots",
+    "TaskUserError", "close_quietly", "dask_client", "host_slots",
     "quiet_dask_logging",
     "render", "render_batch_task", "render_command", "render_frame_task", "render_on_dask",
     "sample_batches", "scheduler_address", "subprocess_env", "task_threads", "within",

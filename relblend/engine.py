@@ -57,6 +57,8 @@ _HISTORY: dict[tuple[str, str], dict[int, np.ndarray]] = {}
 _CLOCK: dict[tuple[str, str], tuple[float, float]] = {}
 # The warnings already reported in this render job.
 _WARNED: set[str] = set()
+# The viewport's limits already reported (once per object and session).
+_VIEW_WARNED: set[str] = set()
 # The stops applied to the last frame of this render job, per scene (auto exposure).
 _EXPOSURE: dict[str, float] = {}
 # World matrices sampled for motion from the animation, per render job and scene.
@@ -569,8 +571,9 @@ def view_motion(depsgraph, camera_view: bool, cam, objects: bool = True):
     motion as F12 has it at this frame (a worldline-mode camera: its β here, as a
     snapshot at this frame's ct'); a free view is at rest. With the camera's motion from
     its animation, the scene clock gives the time, and camera and objects move along
-    their location F-curves (sampled without changing the frame: the viewport cannot;
-    parents and constraints of a moving object are not followed there)."""
+    their F-curves and their parents' (sampled without changing the frame: the viewport
+    cannot; constraints are not followed there, warned once per object:
+    :class:`FcurveSampler`)."""
     from . import animation, export, motion
 
     scene = depsgraph.scene
@@ -588,6 +591,10 @@ def view_motion(depsgraph, camera_view: bool, cam, objects: bool = True):
     clock = scene_clock(scene)
     names = animated_candidates(depsgraph) if objects else []
     sampler = FcurveSampler(depsgraph, [*names, obj.name])
+    for message in sampler.limits.values():
+        if message not in _VIEW_WARNED:  # once per object and session
+            _VIEW_WARNED.add(message)
+            print(f"relray: viewport: warning: {message}", flush=True)
     samples = animation.Samples({})
     frame = scene.frame_current
     moving = animation.object_motions(samples, names, clock, scene.frame_start,
@@ -604,33 +611,115 @@ def view_motion(depsgraph, camera_view: bool, cam, objects: bool = True):
     return event, moving
 
 
+_TRANSFORM_PATHS = ("location", "rotation_euler", "rotation_quaternion", "scale")
+
+
 class FcurveSampler:
-    """World matrices at other frames from the objects' location F-curves (the viewport
-    cannot change the frame): the current matrix with its translation replaced."""
+    """World matrices at other frames from the F-curves of the objects and their parents
+    (the viewport cannot change the frame), as Blender composes them for a parent of type
+    Object:
+
+        world(f) = world_parent(f) · matrix_parent_inverse · basis(f)
+        basis(f) = T(location(f) + Δlocation) · R_Δ · R(rotation(f)) · S(scale(f) ∘ Δscale)
+
+    with each location, rotation (Euler in its order, or quaternion) and scale channel
+    from its F-curve where it has one, else its current value. An object whose chain
+    (itself or an ancestor) has constraints, a parent that is not an Object (a bone, a
+    vertex), an axis-angle rotation or drivers on its transform keeps its current matrix
+    at every frame, and is named in :attr:`limits` (the viewport warns once per object;
+    F12 and the farm export evaluate the whole scene at every frame and follow them)."""
 
     def __init__(self, depsgraph, names):
-        from . import export, presets
+        from . import export
 
         self.frame = 0.0
-        self.base, self.curves = {}, {}
+        self.base: dict[str, np.ndarray] = {}
+        self.chains: dict[str, list] = {}
+        self.limits: dict[str, str] = {}
         for name in names:
             obj = bpy.data.objects[name]
             self.base[name] = export.matrix_np(obj.evaluated_get(depsgraph).matrix_world)
-            curves = {}
-            if obj.parent is None and not obj.constraints:
-                for fc in presets.fcurves_of(obj):
-                    if fc.data_path == "location":
-                        curves[fc.array_index] = fc
-            self.curves[name] = curves
+            chain, why = _parent_chain(obj)
+            if why is not None:
+                self.limits[name] = why
+            elif any(_transform_curves(o) for o in chain):
+                self.chains[name] = chain
 
     def set_frame(self, frame: int, subframe: float) -> None:
         self.frame = frame + subframe
 
     def matrix_of(self, name: str) -> np.ndarray:
-        m = self.base[name].copy()
-        for i, fc in self.curves[name].items():
-            m[i, 3] = fc.evaluate(self.frame)
-        return m
+        chain = self.chains.get(name)
+        if chain is None:
+            return self.base[name].copy()
+        from mathutils import Matrix
+
+        m = Matrix.Identity(4)
+        for i, ob in enumerate(chain):  # root first
+            if i:
+                m = m @ ob.matrix_parent_inverse
+            m = m @ _basis_at(ob, self.frame)
+        return np.array(m, np.float64)
+
+
+def _parent_chain(obj) -> tuple[list, str | None]:
+    """The object's ancestors and itself, root first; or why the viewport cannot follow
+    them by F-curves (None when it can)."""
+    chain = []
+    ob = obj
+    while ob is not None:
+        if ob.constraints:
+            return [], (f"object '{obj.name}': the constraints of '{ob.name}' are not "
+                        "followed in the viewport (F12 follows them)")
+        if ob.parent is not None and ob.parent_type != "OBJECT":
+            return [], (f"object '{obj.name}': the {ob.parent_type.lower()} parent of "
+                        f"'{ob.name}' is not followed in the viewport (F12 follows it)")
+        if ob.rotation_mode == "AXIS_ANGLE" and _transform_curves(ob):
+            return [], (f"object '{obj.name}': the axis-angle rotation of '{ob.name}' is "
+                        "not followed in the viewport (F12 follows it)")
+        if _driven(ob):
+            return [], (f"object '{obj.name}': the drivers on the transform of '{ob.name}' "
+                        "are not followed in the viewport (F12 follows them)")
+        chain.append(ob)
+        ob = ob.parent
+    return chain[::-1], None
+
+
+def _transform_curves(ob) -> dict[tuple[str, int], object]:
+    from . import presets
+
+    return {(fc.data_path, fc.array_index): fc for fc in presets.fcurves_of(ob)
+            if fc.data_path in _TRANSFORM_PATHS}
+
+
+def _driven(ob) -> bool:
+    ad = ob.animation_data
+    return ad is not None and any(d.data_path in _TRANSFORM_PATHS for d in ad.drivers)
+
+
+def _basis_at(ob, frame: float):
+    """The object's basis matrix (``matrix_basis``) with its F-curves at ``frame``."""
+    from mathutils import Euler, Matrix, Quaternion, Vector
+
+    curves = _transform_curves(ob)
+
+    def channel(path: str, current) -> list[float]:
+        return [float(curves[(path, i)].evaluate(frame)) if (path, i) in curves
+                else float(v) for i, v in enumerate(current)]
+
+    loc = Vector(channel("location", ob.location)) + ob.delta_location
+    scale = Vector([a * b for a, b in zip(channel("scale", ob.scale), ob.delta_scale,
+                                          strict=True)])
+    if ob.rotation_mode == "QUATERNION":
+        q = Quaternion(channel("rotation_quaternion", ob.rotation_quaternion)).normalized()
+        rot = (ob.delta_rotation_quaternion.normalized() @ q).to_matrix()
+    elif ob.rotation_mode == "AXIS_ANGLE":  # not animated (see _parent_chain)
+        rot = ob.matrix_basis.to_3x3().normalized()
+    else:
+        e = Euler(channel("rotation_euler", ob.rotation_euler), ob.rotation_mode)
+        delta = Euler(ob.delta_rotation_euler, ob.rotation_mode)
+        rot = delta.to_matrix() @ e.to_matrix()
+    return Matrix.LocRotScale(loc, rot, scale)
 
 
 def draw_image(engine, scene, rgba: np.ndarray, opaque: bool = True) -> None:

@@ -39,8 +39,9 @@ moving objects      an object F12 moves (``object.relray.velocity`` ≠ 0): its 
                     spectral model, Doppler, searchlight
 [output]            the PNGs through the scene's colour management: Blender's OCIO config
                     copied to colormanagement/, display, view transform (AgX ...) and
-                    look as view_transform; the view's exposure, or "auto" with Auto
-                    Exposure (Blender scales Combined)
+                    look as view_transform, with the view's gamma and its curves
+                    (baked to tables: :func:`baked_curves`); the view's exposure, or
+                    "auto" with Auto Exposure (Blender scales Combined)
 ==================  ========================================================================
 
 Limits (each a clear :class:`FarmExportError`): the camera must not move or turn
@@ -187,9 +188,9 @@ def animation_motion(context, cam, frames: range, width: int, height: int,
 def colour_management(scene, out: Path, warnings: list[str]) -> dict[str, Any]:
     """The job's PNG settings from the scene's colour management, so the farm's PNGs look
     like F12's: Blender's OCIO config copied into ``out/colormanagement`` (once), its
-    display, view transform and look as ``output.view_transform``, the view's exposure
-    (or "auto" with Auto Exposure) as ``output.exposure``. Gamma and curves are not
-    carried (warned)."""
+    display, view transform, look, gamma and curves (:func:`baked_curves`) as
+    ``output.view_transform``, the view's exposure (or "auto" with Auto Exposure) as
+    ``output.exposure``."""
     import os
 
     import bpy
@@ -202,11 +203,16 @@ def colour_management(scene, out: Path, warnings: list[str]) -> dict[str, Any]:
     target = out / "colormanagement"
     if not (target / source.name).is_file():
         shutil.copytree(source.parent, target, dirs_exist_ok=True)
-    if vs.gamma != 1.0 or vs.use_curve_mapping:
-        warnings.append("the view's gamma and curves are not carried into the farm's PNGs")
-    table: dict[str, Any] = {"view_transform": {
+    view: dict[str, Any] = {
         "config": f"colormanagement/{source.name}", "display": ds.display_device,
-        "view": vs.view_transform, "look": "" if vs.look in ("None", "") else vs.look}}
+        "view": vs.view_transform, "look": "" if vs.look in ("None", "") else vs.look}
+    if vs.gamma != 1.0:
+        view["gamma"] = float(vs.gamma)
+    if vs.use_curve_mapping:
+        curves = baked_curves(vs.curve_mapping, warnings)
+        if curves is not None:
+            view["curves"] = curves
+    table: dict[str, Any] = {"view_transform": view}
     if scene.relray.auto_exposure:
         table["exposure"] = "auto"
         if vs.exposure != 0.0:
@@ -214,6 +220,55 @@ def colour_management(scene, out: Path, warnings: list[str]) -> dict[str, Any]:
     else:
         table["exposure"] = float(vs.exposure)
     return table
+
+
+CURVE_TABLE_SAMPLES = 257
+"""Blender's curve tables have CM_TABLE + 1 = 257 entries over the clip range."""
+
+
+def baked_curves(cm, warnings: list[str]) -> dict[str, Any] | None:
+    """The view's RGB curves (a ``CurveMapping``) as ``output.view_transform.curves``.
+
+    Blender applies them to the scene-linear pixels before the exposure and the view
+    (:mod:`relray.core.output.display_curves`): per channel c,
+    ``C(curve_c((x - black_c) / (white_c - black_c)))``, where C is the combined curve,
+    through a table of 257 samples of ``curve_c`` over its range with C applied to each
+    sample (Blender's premultiplied table). Baked here with ``CurveMapping.evaluate`` at
+    those same u, so the tables are Blender's; outside the range the slopes are those
+    Blender extends with (Extend Extrapolated: the channel curve's end slope times the
+    combined curve's, each measured one unit past its end; Horizontal: 0). The
+    Film-like tone is not per channel: warned, and the curves are left out."""
+    if getattr(cm, "tone", "STANDARD") != "STANDARD":
+        warnings.append("the view's Film-like curves are not carried into the farm's PNGs "
+                        "(only the Standard tone is)")
+        return None
+    cm.initialize()
+    combined = cm.curves[3]
+    extrapolated = cm.extend == "EXTRAPOLATED"
+    lo_c, hi_c = _curve_range(cm, combined)
+
+    def slope(curve, at: float, step: float) -> float:
+        return (cm.evaluate(curve, at + step) - cm.evaluate(curve, at)) / step \
+            if extrapolated else 0.0
+
+    out: dict[str, Any] = {"black": [float(v) for v in cm.black_level],
+                           "white": [float(v) for v in cm.white_level]}
+    ranges, slopes = [], []
+    for name, curve in zip(("red", "green", "blue"), cm.curves[:3], strict=True):
+        lo, hi = _curve_range(cm, curve)
+        u = np.linspace(lo, hi, CURVE_TABLE_SAMPLES)
+        out[name] = [float(cm.evaluate(combined, cm.evaluate(curve, float(x)))) for x in u]
+        ranges.append([lo, hi])
+        slopes.append([slope(curve, lo, -1.0) * slope(combined, lo_c, -1.0),
+                       slope(curve, hi, 1.0) * slope(combined, hi_c, 1.0)])
+    out["ranges"], out["slopes"] = ranges, slopes
+    return out
+
+
+def _curve_range(cm, curve) -> tuple[float, float]:
+    """The x range of a curve's table: the clip range, widened to the curve's points."""
+    xs = [p.location[0] for p in curve.points]
+    return float(min(cm.clip_min_x, *xs)), float(max(cm.clip_max_x, *xs))
 
 
 def check_static_camera(samples: list[FrameSample], tol: float = 1e-6) -> None:

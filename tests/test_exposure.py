@@ -1,6 +1,7 @@
 """Automatic exposure (core/output/exposure.py): metering against known answers, the
 scaling law, smoothing of a step, and end to end: the searchlight effect at β = 0.5
-head-on and β = 0.9 looking back, resume, the metadata, the progress events, the farm."""
+head-on and β = 0.9 looking back, resume, the metadata, the progress events (on a Dask
+farm: tests/test_farm.py)."""
 
 from __future__ import annotations
 
@@ -13,10 +14,9 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from relray.core import cli, farm
+from relray.core import cli
 from relray.core.errors import UserError
 from relray.core.output import exposure, imageio
-from relray.core.output.frame_files import plan_frames
 from relray.core.progress import JsonReporter
 from relray.core.runner import render_job
 from relray.core.scene import job as jobmod
@@ -381,17 +381,3 @@ def test_a_bad_exposure_exits_2_naming_key_and_file(tmp_path, capsys, value, wor
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "output.exposure" in lines[0] and str(path) in lines[0]
     assert not (tmp_path / "out").exists()
-
-
-def test_a_farm_refuses_auto_with_several_frames_to_render(tmp_path):
-    path = tmp_path / "job.toml"
-    path.write_text(SEARCHLIGHT.format(exposure='"auto"', motion=ANIMATION))
-    job = jobmod.load_job(path)
-    with pytest.raises(UserError) as err:
-        farm.check_auto_exposure(job, plan_frames(job))
-    assert err.value.key == "output.exposure"
-    one = jobmod.with_overrides(job, frames=(2, 2))
-    farm.check_auto_exposure(one, plan_frames(one))  # one frame: allowed
-    path.write_text(SEARCHLIGHT.format(exposure="1.0", motion=ANIMATION))
-    fixed = jobmod.load_job(path)
-    farm.check_auto_exposure(fixed, plan_frames(fixed))  # a number: allowed

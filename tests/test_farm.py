@@ -21,9 +21,11 @@ from pathlib import Path
 import farm_hooks
 import numpy as np
 import pytest
+from test_exposure import ANIMATION, SEARCHLIGHT
 
 from relray.core import cli, farm, progress
 from relray.core.errors import UserError
+from relray.core.output import exposure
 from relray.core.output.imageio import frame_complete, read_exr
 from relray.core.runner import render_job
 from relray.core.scene import job as jobmod
@@ -484,6 +486,51 @@ def test_a_frame_that_always_crashes_fails_alone(tmp_path, client, reference, ca
     result = farm.render_on_dask(job, client, threads=1)
     assert result.rendered == [4] and result.skipped == 5
     assert_same_frames(job.output.dir, reference[6], range(1, 7))
+
+
+def exposures(out: Path, frames) -> list[tuple[str, str]]:
+    """Each frame's recorded (applied stops, meter reading), exact strings."""
+    metas = [read_exr(out / f"f_{f:03d}.exr")[1] for f in frames]
+    return [(m["relray:exposure"], m["relray:exposure_metered"]) for m in metas]
+
+
+def test_auto_exposure_on_the_farm_equals_a_local_render(tmp_path, client, capsys):
+    """output.exposure = "auto" over an animation on the cluster: the same exposures,
+    PNGs and EXRs as a local render. Tolerance zero, derived: a farm frame is
+    bit-identical to the local one (module docstring of core/farm.py), the reading is a
+    function of those pixels, and the client's chain smooths the readings in frame order
+    with the same float operations as the local run. A frame that crashes: the frames
+    before it are written, it and the frames after it are not (their exposure needs its
+    reading); the rerun renders those and still matches the local render."""
+    local = tmp_path / "local"
+    local.mkdir()
+    text = SEARCHLIGHT.format(exposure='"auto"', motion=ANIMATION)
+    (local / "job.toml").write_text(text)
+    assert cli.main(["render", str(local / "job.toml"), "--quiet"]) == 0
+    frames = range(1, 6)
+    ref = exposures(local / "out", frames)
+    assert len({r for _, r in ref}) == 5  # every frame meters differently: a real test
+    assert [float(a) for a, _ in ref] == pytest.approx(
+        exposure.smooth_series([float(r) for _, r in ref]), abs=1e-12)
+
+    path = write_job(tmp_path / "farm", text=text)
+    job = load(path)
+    set_worker_env(client, **{farm_hooks.CRASH_ENV: "3"})
+    try:
+        result = farm.render_on_dask(job, client, threads=1)
+    finally:
+        set_worker_env(client, **{farm_hooks.CRASH_ENV: None})
+    assert result.rendered == [1, 2] and sorted(result.failed) == [3, 4, 5]
+    assert "frame 3 crashes" in result.failed[3]
+    assert all("needs the reading of frame 3" in result.failed[f] for f in (4, 5))
+    assert sorted(complete_frames(job)) == [1, 2]
+    assert exposures(job.output.dir, [1, 2]) == ref[:2]
+    assert not [q for q in job.output.dir.iterdir() if ".tmp-" in q.name]
+
+    result = farm.render_on_dask(job, client, threads=1)  # resumes: frames 3-5 only
+    assert result.rendered == [3, 4, 5] and result.skipped == 2 and not result.failed
+    assert exposures(job.output.dir, frames) == ref
+    assert_same_frames(job.output.dir, local / "out", frames)  # EXR and PNG pixels
 
 
 def test_still_in_sample_batches_is_the_same_for_any_number_of_workers(tmp_path, client):

@@ -55,8 +55,9 @@ resumed run reads the readings of the frames already done back from their metada
 instead of rendering them again, and computes the same e_n as an uninterrupted run
 (:class:`ExposureChain`, :func:`.frame_files.exposure_chain`). A range is its own
 animation: ``--frames 10-20`` starts its average at frame 10. The frames must be written
-in order, so a Dask farm renders an ``"auto"`` animation only one frame at a time (a
-still, or the last frame left); see :func:`.farm.render_on_dask`.
+in order: a Dask farm renders them side by side, and its workers hand the resolved
+images back to the client, which writes them in frame order through one chain, so the
+farm's exposures equal a local run's (:class:`.farm._FramesInOrder`).
 
 For the Blender add-on (per frame, frames in order): ``stops = meter(rgba)`` then
 ``applied = smooth(previous_applied, stops)`` (``previous_applied`` None on the first

@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import UserError
 from ..files import is_regular_file
 from ..physics import relativity
-from ..render.film import Film
+from ..render.film import Film, FilmImage
 from ..scene.description import AUTO_EXPOSURE, Job
 from ..scene.motion import frame_events
 from ..scene.names import NAME_MAX_BYTES, format_frame_name
@@ -329,10 +329,24 @@ def write_film(job: Job, frame: int, event: relativity.ShutterEvent, film: Film,
     The files record ``relray:exposure`` (stops applied to the PNG) and, auto,
     ``relray:exposure_metered``; the EXR pixels are never exposed.
     """
+    return write_image(job, frame, event, resolve_film(frame, film, to_rgb), seconds,
+                       d_range, digest, chain)
+
+
+def resolve_film(frame: int, film: Film, to_rgb: np.ndarray) -> FilmImage:
+    """``film`` resolved to its image (:meth:`Film.resolve`), warning once about the
+    non-finite samples it dropped."""
     if film.nonfinite_samples:
         logging.getLogger("relray").warning("frame %d: %d non-finite samples dropped", frame,
                                             film.nonfinite_samples)
-    image = film.resolve(to_rgb)
+    return film.resolve(to_rgb)
+
+
+def write_image(job: Job, frame: int, event: relativity.ShutterEvent, image: FilmImage,
+                seconds: float, d_range: tuple[float, float], digest: str | None = None,
+                chain: ExposureChain | None = None) -> tuple[list, FrameExposure]:
+    """:func:`write_film` of an already resolved image (the Dask farm's frames with
+    ``"auto"``: resolved on a worker, written by the client in frame order)."""
     if job.output.exposure == AUTO_EXPOSURE:
         chain = chain if chain is not None else exposure_chain(job)
         assert chain is not None

@@ -85,6 +85,7 @@ from ... import __version__
 from ..errors import UserError
 from ..render.film import FilmImage
 from ..scene.description import OUTPUT_FORMATS
+from .display_curves import apply_curves, apply_gamma
 
 AOV_CHANNELS: dict[str, str] = {"depth": "Depth.Z", "doppler": "Doppler.D", "lab_time": "LabTime.T"}
 """EXR channel name of each known one-channel AOV; other AOVs keep their own name."""
@@ -385,12 +386,21 @@ def png_codes(rgba: np.ndarray, exposure: float = 0.0, alpha: bool = False) -> n
     return np.concatenate([to_8bit(srgb_encode(straight)), to_8bit(a)[..., None]], axis=2)
 
 
-def display_codes(rgba: np.ndarray, exposure: float, view) -> np.ndarray:
+def display_codes(rgba: np.ndarray, exposure: float, view, alpha: bool = True) -> np.ndarray:
     """8-bit codes of linear Rec.709 ``rgba`` × 2**exposure through an OpenColorIO display
     view (``description.ViewTransform``: config, display, view, look), from the config's
-    ``scene_linear`` role (Blender's config: Linear Rec.709), alpha unpremultiplied as
-    for the plain PNG. Returns (h, w, 4) uint8 (straight alpha)."""
+    ``scene_linear`` role (Blender's config: Linear Rec.709). Returns (h, w, 4) uint8.
+    With ``alpha`` the colour is unpremultiplied around the view (and returned
+    premultiplied, as OpenImageIO gives it); without, the premultiplied colour goes
+    through the view as an opaque one (the image over black, alpha 1), which is what
+    Blender writes to an RGB file (measured with ``Image.save_render``: the same codes).
+    The view's curves act on the scene-linear values before the exposure, its gamma on
+    the display values after the view, in Blender's order (:mod:`.display_curves`)."""
     rgba = np.asarray(rgba, np.float32).copy()
+    if not alpha:
+        rgba[..., 3] = 1.0
+    if view.curves is not None:
+        rgba[..., :3] = apply_curves(rgba[..., :3], view.curves)
     rgba[..., :3] *= np.float32(2.0 ** float(exposure))
     h, w = rgba.shape[:2]
     buf = oiio.ImageBuf(oiio.ImageSpec(w, h, 4, oiio.FLOAT))
@@ -402,6 +412,10 @@ def display_codes(rgba: np.ndarray, exposure: float, view) -> np.ndarray:
         raise UserError(f"the view transform failed: {out.geterror()}",
                         key="output.view_transform", file=view.config)
     px = np.asarray(out.get_pixels(oiio.FLOAT), np.float64).reshape(h, w, 4)
+    if view.gamma != 1.0:  # on the straight colour, inside the unpremultiply as Blender
+        a = np.clip(px[..., 3:4], 0.0, 1.0)
+        straight = np.divide(px[..., :3], a, out=np.zeros_like(px[..., :3]), where=a > 0.0)
+        px[..., :3] = apply_gamma(straight, view.gamma) * a
     return to_8bit(np.clip(px, 0.0, 1.0))
 
 
@@ -420,10 +434,12 @@ def write_png(
         codes = png_codes(rgba, exposure, alpha)
         transform = "sRGB (IEC 61966-2-1)"
     else:
-        codes = display_codes(rgba, exposure, view)
+        codes = display_codes(rgba, exposure, view, alpha)
         codes = codes if alpha else codes[..., :3]
         transform = f"OCIO {view.display} / {view.view}" + (f" / {view.look}" if view.look
                                                              else "")
+        transform += (f", gamma {view.gamma:g}" if view.gamma != 1.0 else "") + (
+            ", curves" if view.curves is not None else "")
     names = RGBA_CHANNELS[: codes.shape[2]]
     # The bytes are final: stop OpenImageIO from un-premultiplying them again.
     attrs = {"oiio:ColorSpace": "sRGB", "oiio:UnassociatedAlpha": 1,

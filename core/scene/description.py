@@ -86,6 +86,20 @@ class RenderSettings:
 
 
 @dataclass(frozen=True)
+class DisplayCurves:
+    """``output.view_transform.curves``: per channel c, the scene-linear value x maps to
+    ``table_c(u)``, ``u = (x - black_c) / (white_c - black_c)``; each table is evenly
+    spaced over ``u_ranges[c]`` and continues linearly outside it with ``slopes[c]``
+    (below, above). See :mod:`..output.display_curves`."""
+
+    black: tuple[float, float, float]
+    white: tuple[float, float, float]
+    u_ranges: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+    tables: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]
+    slopes: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+
+
+@dataclass(frozen=True)
 class ViewTransform:
     """``output.view_transform``: the PNG through an OpenColorIO display view (as
     Blender's colour management does), instead of the plain sRGB curve. ``config``: an
@@ -95,6 +109,10 @@ class ViewTransform:
     display: str = "sRGB"
     view: str = "Standard"
     look: str = ""
+    gamma: float = 1.0
+    """Display values v become v^(1/gamma) after the view (Blender's view Gamma)."""
+    curves: DisplayCurves | None = None
+    """Blender's view Curves, applied to the scene-linear pixels before the exposure."""
 
 
 @dataclass(frozen=True)

@@ -77,6 +77,7 @@ from .description import (
     IMAGE_SUFFIXES,
     TEXTURE_SLOTS,
     CameraSettings,
+    DisplayCurves,
     EnvironmentSpec,
     Job,
     LightSpec,
@@ -233,7 +234,24 @@ def _view_transform(o: schema.Output, ctx: _Ctx, job_dir: Path) -> ViewTransform
     if problem is not None:
         key, why = problem
         raise sub.error(key, why)
-    return ViewTransform(path, v.display, v.view, v.look)
+    return ViewTransform(path, v.display, v.view, v.look, v.gamma,
+                         _display_curves(v.curves, sub.sub("curves")))
+
+
+def _display_curves(c: schema.DisplayCurvesTable | None, ctx: _Ctx) -> DisplayCurves | None:
+    """``output.view_transform.curves``: three tables of one length, white ≠ black."""
+    if c is None:
+        return None
+    for name in ("green", "blue"):
+        if len(getattr(c, name)) != len(c.red):
+            raise ctx.error(name, f"has {len(getattr(c, name))} values, red has {len(c.red)}: "
+                                  "the three tables must have the same length")
+    for k, (b, w) in enumerate(zip(c.black, c.white, strict=True)):
+        if b == w:
+            raise ctx.error("white", f"channel {'RGB'[k]}: white equals black ({w:g})")
+    return DisplayCurves(tuple(c.black), tuple(c.white), tuple(tuple(r) for r in c.ranges),
+                         (tuple(c.red), tuple(c.green), tuple(c.blue)),
+                         tuple(tuple(s) for s in c.slopes))
 
 
 def _nearest_rotation(R: np.ndarray) -> np.ndarray:

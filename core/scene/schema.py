@@ -367,6 +367,42 @@ class Render(Table):
                          "biased; 0 = off.")
 
 
+MAX_CURVE_SAMPLES = 4096
+
+
+def _ranges_rule(v: list[list[float]]) -> list[list[float]]:
+    for k, (a, b) in enumerate(v):
+        if not a < b:
+            raise _fail(f"row {k} must be [start, end] with start < end (got {a:g}, {b:g})")
+    return v
+
+
+CurveValues = Annotated[list[Number], Field(min_length=2, max_length=MAX_CURVE_SAMPLES),
+                        Expect(f"an array of 2 to {MAX_CURVE_SAMPLES} numbers")]
+
+
+class DisplayCurvesTable(Table):
+    """``output.view_transform.curves``: Blender's view Curves as tables, before the view."""
+
+    needs: ClassVar[str] = "curves need red, green and blue"
+    black: Vec3 = Field([0.0, 0.0, 0.0], description="Black level per channel (R, G, B): "
+                                                    "u = (x - black) / (white - black).")
+    white: Vec3 = Field([1.0, 1.0, 1.0], description="White level per channel; not equal "
+                                                    "to black.")
+    ranges: _matrix(3, 2, AfterValidator(_ranges_rule)) = Field(
+        [[0.0, 1.0], [0.0, 1.0], [0.0, 1.0]],
+        description="Per channel [start, end], start < end: u at the first and last value "
+                    "of its table (evenly spaced between).")
+    red: CurveValues = Field(description="Output of the red channel at the table's u "
+                                         "(the combined curve already applied).")
+    green: CurveValues = Field(description="The same for green; as many values as red.")
+    blue: CurveValues = Field(description="The same for blue; as many values as red.")
+    slopes: _matrix(3, 2) = Field(
+        [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0]],
+        description="Per channel [below, above]: d(output)/du outside its range (0: the end "
+                    "value holds, Blender's Extend Horizontal).")
+
+
 class ViewTransformTable(Table):
     """``output.view_transform``: PNGs through an OpenColorIO display view."""
 
@@ -378,6 +414,10 @@ class ViewTransformTable(Table):
     view: Str = Field("Standard", description="A view of that display (Blender: AgX, "
                                               "Filmic, Standard, ...).")
     look: Str = Field("", description="A look of the config, or empty.")
+    gamma: Positive = Field(1.0, description="Blender's view Gamma: the display values "
+                                             "v become v^(1/gamma) after the view.")
+    curves: DisplayCurvesTable = Field(
+        None, description="Blender's view Curves, baked; absent: none.")
 
 
 class Output(Table):
@@ -1258,6 +1298,7 @@ def markdown() -> str:
         ("[motion]", Motion, ()), ("motion.keyframes entries", Keyframe, ()),
         ("motion.events entries", CameraEvent, ()),
         ("output.view_transform", ViewTransformTable, ()),
+        ("output.view_transform.curves", DisplayCurvesTable, ()),
         ("[scene]", Scene, ()), ("scene.environment", Environment, ()),
         ("scene.stars", Stars, ()), ("[[materials]]", Material, ()),
         ("materials.emission_spectrum", Spectrum, ()),

@@ -134,6 +134,117 @@ def test_the_farm_png_goes_through_the_scenes_view_transform(cornell, engine, tm
     assert np.abs(plain - f12).mean() * 255 > 5.0  # what the farm PNG was before
 
 
+def s_curve(scene) -> None:
+    """The view's curves: an S on the combined curve, a lifted red, black and white
+    levels (Extend Extrapolated, Blender's default for the view's curves)."""
+    vs = scene.view_settings
+    vs.use_curve_mapping = True
+    cm = vs.curve_mapping
+    c = cm.curves[3]
+    c.points.new(0.25, 0.12)
+    c.points.new(0.75, 0.88)
+    cm.curves[0].points.new(0.5, 0.6)
+    cm.black_level = (0.01, 0.0, 0.0)
+    cm.white_level = (1.0, 0.9, 1.2)
+    cm.update()
+
+
+def test_the_farm_png_carries_the_views_gamma_and_curves(cornell, engine, tmp_path):
+    """AgX with gamma 1.6 and an S-curve: the farm job's PNG is F12's PNG (the same
+    seed, so the same linear pixels) within 2 codes, where leaving the gamma and the
+    curves out (what the farm did before) is far off."""
+    scene = cornell
+    scene.view_settings.view_transform = "AgX"
+    scene.view_settings.gamma = 1.6
+    s_curve(scene)
+    scene.render.dither_intensity = 0.0  # Blender's PNG dither adds ±1 code of noise
+    rendering.set_output(scene, tmp_path, "f12_", "PNG")
+    scene.render.image_settings.color_mode = "RGB"
+    rendering.render_still(scene, write=True)
+    f12 = rendering.load_image(tmp_path / "f12_.png")[..., :3]
+    out = tmp_path / "farm"
+    assert bpy.ops.relray.export_farm(directory=str(out)) == {"FINISHED"}
+    import tomllib
+
+    view = tomllib.loads((out / "job.toml").read_text())["output"]["view_transform"]
+    assert view["gamma"] == pytest.approx(1.6) and len(view["curves"]["red"]) == 257
+    warnings: list[str] = []
+    ext_module("relblend.farm").colour_management(scene, tmp_path / "cm", warnings)
+    assert warnings == []  # nothing left out any more
+    cli = ext_module("core.cli")
+    assert cli.main(["render", str(out / "job.toml"), "--quiet", "--frames", "1-1"]) == 0
+    farm = rendering.load_image(out / "out" / "frame_0001.png")[..., :3]
+    diff = np.abs(farm - f12) * 255
+    print(f"farm vs F12 with gamma and curves: mean {diff.mean():.3f}, max {diff.max():.0f} "
+          "codes")
+    assert diff.max() <= 2.0, (diff.mean(), diff.max())
+    # leaving out the gamma, the curves or both (the farm's PNG before) is far off: the
+    # farm's own linear pixels through the view without them
+    from dataclasses import replace
+
+    job = ext_module("core.scene.job").load_job(out / "job.toml")
+    vt = job.output.view_transform
+    imageio = ext_module("core.output.imageio")
+    rgba = imageio.read_exr(out / "out" / "frame_0001.exr")[0]
+    rgba = np.stack([rgba[c] for c in "RGBA"], axis=2)
+    for without in (replace(vt, gamma=1.0, curves=None), replace(vt, gamma=1.0),
+                    replace(vt, curves=None)):
+        codes = imageio.display_codes(rgba, job.output.exposure, without, alpha=False)
+        assert np.abs(codes[..., :3] / 255.0 - f12).max() * 255 > 20.0
+
+
+@pytest.mark.parametrize("extend", ["EXTRAPOLATED", "HORIZONTAL"])
+def test_the_baked_curves_are_blenders_on_a_ramp(ext, tmp_path, extend):
+    """A ramp from below black to 10 × white (every branch: the tables, black and white
+    levels per channel, channel and combined curves, the extension on both sides) through
+    Blender's Standard view with curves, saved as a 16-bit PNG by Blender itself
+    (Image.save_render, as F12's Save as Render), against the farm's 8-bit codes of the
+    same pixels from the baked tables: within the 8-bit rounding (0.5 code) plus half a
+    16-bit step."""
+    scene = scenes.reset_scene()
+    w = 256
+    img = bpy.data.images.new("ramp", w, 1, float_buffer=True, alpha=False)
+    vals = np.concatenate([np.linspace(-0.2, 1.2, 200), np.logspace(0.1, 1.0, 56)])
+    px = np.ones((1, w, 4), np.float32)
+    px[..., 0], px[..., 1], px[..., 2] = vals, 0.7 * vals, 0.4 * vals
+    img.pixels.foreach_set(px.ravel())
+    settings = scene.render.image_settings
+    settings.file_format, settings.color_mode, settings.color_depth = "PNG", "RGB", "16"
+    scene.render.dither_intensity = 0.0
+    vs = scene.view_settings
+    vs.view_transform = "Standard"
+    vs.use_curve_mapping = True
+    cm = vs.curve_mapping
+    cm.curves[3].points.new(0.25, 0.1)
+    cm.curves[3].points.new(0.75, 0.9)
+    cm.curves[0].points[1].location = (1.0, 0.8)
+    cm.curves[0].points.new(0.5, 0.6)
+    cm.curves[1].points.new(0.3, 0.2)
+    cm.black_level, cm.white_level = (0.05, 0.02, 0.0), (0.9, 1.1, 1.3)
+    cm.extend = extend
+    cm.update()
+    img.save_render(str(tmp_path / "ramp.png"), scene=scene)
+    import OpenImageIO as oiio  # noqa: N813
+
+    blender = oiio.ImageBuf(str(tmp_path / "ramp.png")).get_pixels(oiio.FLOAT)[0, :, :3]
+    warnings: list[str] = []
+    t = ext_module("relblend.farm").baked_curves(cm, warnings)
+    assert not warnings
+    description = ext_module("core.scene.description")
+    curves = description.DisplayCurves(
+        tuple(t["black"]), tuple(t["white"]), tuple(map(tuple, t["ranges"])),
+        (tuple(t["red"]), tuple(t["green"]), tuple(t["blue"])), tuple(map(tuple, t["slopes"])))
+    config = Path(bpy.utils.system_resource("DATAFILES", path="colormanagement")) / "config.ocio"
+    view = description.ViewTransform(config, "sRGB", "Standard", curves=curves)
+    codes = ext_module("core.output.imageio").display_codes(px, 0.0, view, alpha=False)
+    diff = np.abs(codes[0, :, :3] - 255.0 * blender)
+    assert diff.max() <= 0.5 + 0.5 * 255 / 65535 + 1e-3, diff.max()
+    assert (t["slopes"] != [[0.0, 0.0]] * 3) == (extend == "EXTRAPOLATED")
+    plain = description.ViewTransform(config, "sRGB", "Standard")
+    without = ext_module("core.output.imageio").display_codes(px, 0.0, plain, alpha=False)
+    assert np.abs(without[0, :, :3] - 255.0 * blender).max() > 20.0  # the curves matter
+
+
 def compositor_denoise(scene):
     """Render Layers → Denoise (Image, Normal, Albedo) → the compositor's output, in
     Blender 5.0's node-group compositor or the older scene node tree."""

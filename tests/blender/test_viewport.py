@@ -95,3 +95,70 @@ def test_an_animated_camera_view_moves_as_in_f12(ext, engine):
     np.testing.assert_allclose(state.event.x, f12["event"].x, atol=1e-5)
     wl = scene_data[2]["ball"].worldline
     np.testing.assert_allclose(np.diff(wl.pivot[:, 0]) / np.diff(wl.t), 0.2, rtol=1e-5)
+
+
+def f12_worldline(scene, name: str):
+    """The worldline F12 gives an object: every sample evaluated by changing the frame
+    (the engine's _setup_animation), for comparison with the viewport's."""
+    animation, engine_mod = ext_module("relblend.animation"), ext_module("relblend.engine")
+    export = ext_module("relblend.export")
+    frame = scene.frame_current
+
+    def set_frame(f: int, sub: float) -> None:
+        scene.frame_set(f, subframe=sub)
+
+    def matrix_of(n: str):
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        return export.matrix_np(bpy.data.objects[n].evaluated_get(depsgraph).matrix_world)
+
+    try:
+        moving = animation.object_motions(animation.Samples({}), [name],
+                                          engine_mod.scene_clock(scene), scene.frame_start,
+                                          scene.frame_end, frame, set_frame, matrix_of)
+    finally:
+        scene.frame_set(frame)
+    return moving[name].worldline
+
+
+def test_a_child_of_an_animated_empty_moves_in_the_viewport_as_in_f12(ext, engine, capsys):
+    """The ball is parented (with a parent inverse) to an empty whose location and
+    rotation are keyed, and has a location key of its own: the viewport composes the
+    chain from the F-curves (it cannot change the frame) and gets F12's worldline. A
+    constrained object is the named limit: warned once, however often the view updates."""
+    scene = clocked_scene()
+    ball = scene.objects["ball"]
+    pivot = bpy.data.objects.new("pivot", None)
+    scene.collection.objects.link(pivot)
+    pivot.location = (0.5, 1.0, 0.0)
+    bpy.context.view_layer.update()
+    ball.parent = pivot
+    ball.matrix_parent_inverse = pivot.matrix_world.inverted()
+    animate_location(pivot, ((0, (0.5, 1.0, 0.0)), (10, (2.5, 1.0, 0.0))))
+    pivot.rotation_euler = (0.0, 0.0, 0.0)
+    pivot.keyframe_insert("rotation_euler", frame=0)
+    pivot.rotation_euler = (0.0, 0.0, 0.2)
+    pivot.keyframe_insert("rotation_euler", frame=10)
+    ball.keyframe_insert("location", frame=0)
+    ball.location.z += 0.5
+    ball.keyframe_insert("location", frame=10)
+    scene.frame_start, scene.frame_end = 1, 8
+    scene.frame_set(4)
+    f12 = f12_worldline(scene, "ball")
+    context, depsgraph = camera_view_context(scene, 32, 32)
+    view = engine.view_scene(context, depsgraph, 32, 32)[2]["ball"].worldline
+    np.testing.assert_allclose(view.t, f12.t, rtol=1e-6)
+    np.testing.assert_allclose(view.pivot, f12.pivot, atol=1e-5)
+    assert np.ptp(f12.pivot[:, 0]) > 0.5 and np.ptp(f12.pivot[:, 2]) > 0.1  # it moves
+    assert "constraints" not in capsys.readouterr().out
+
+    other = scene.objects["ball"].copy()
+    other.name = "held"
+    other.parent = None
+    other.animation_data_clear()
+    scene.collection.objects.link(other)
+    other.constraints.new("COPY_LOCATION").target = pivot
+    for _ in range(2):
+        context, depsgraph = camera_view_context(scene, 32, 32)
+        engine.view_scene(context, depsgraph, 32, 32)
+    out = capsys.readouterr().out
+    assert out.count("object 'held': the constraints of 'held' are not followed") == 1, out

@@ -44,6 +44,7 @@ def run_probe(tmp_path: Path, mode: str) -> Path:
            "--", str(out), mode]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+    (out / "log.txt").write_text(proc.stdout + proc.stderr)
     assert (out / "probe.json").is_file(), proc.stdout[-3000:] + proc.stderr[-3000:]
     probe = json.loads((out / "probe.json").read_text())
     assert "error" not in probe, probe["error"]
@@ -99,3 +100,37 @@ def test_the_relativity_panels_as_an_artist_sees_them(ext, tmp_path):
         panel = screen.crop(shot, info["area"], info["window"][1])
         assert panel.shape[0] > 200 and panel.std() > 10.0, (name, panel.shape)
         save_picture(panel, f"panel_{name}", tmp_path)
+
+
+def test_ctrl_f12_while_watching_the_rendered_viewport(ext, tmp_path):
+    """The Rendered viewport is showing the scene when Ctrl-F12 starts (the render job
+    beside the viewport's worker): Blender reports every frame and the job complete, the
+    frames are those a render without the viewport writes (the same seed; the camera
+    moves, so they differ from frame to frame), no traceback, and afterwards the viewport
+    renders a new image (no deadlock: the interactive Blender must get there at all)."""
+    scene = scenes.build_cornell(width=64, height=64)
+    scene.relray.preview_samples = 2
+    scene.render.dither_intensity = 0.0
+    cam = scene.camera
+    cam.keyframe_insert("location", frame=1)
+    cam.location.x += 0.3
+    cam.keyframe_insert("location", frame=3)
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(1)
+    rendering.set_output(scene, tmp_path / "probe", "anim_", "PNG")
+    scene.render.image_settings.color_mode = "RGB"
+    out = run_probe(tmp_path, "animation")
+    probe = json.loads((out / "probe.json").read_text())
+    log = (out / "log.txt").read_text()
+    assert "Traceback" not in log, log[-3000:]
+    assert probe["events"].count("frame") == 3 and probe["events"][-1] == "complete", probe
+    assert probe["samples"] == 3  # the viewport's new image, after the job
+    rendering.set_output(scene, tmp_path / "ref", "anim_", "PNG")
+    rendering.render_animation(scene)
+    frames = []
+    for f in (1, 2, 3):
+        seen = rendering.load_image(tmp_path / "probe" / f"anim_{f:04d}.png")
+        ref = rendering.load_image(tmp_path / "ref" / f"anim_{f:04d}.png")
+        np.testing.assert_array_equal(seen, ref)
+        frames.append(seen)
+    assert np.abs(frames[0] - frames[2]).mean() > 0.01  # the frames differ

@@ -7,6 +7,10 @@ MODE "viewport": the Cornell box through the scene camera in a maximised 3D view
 Rendered shading; once the viewport session's image is done, the screen is captured with
 ``xwd`` and ``OUT_DIR/probe.json`` says where the 3D view's region is and where its
 image (``view.npy``, linear RGBA, row 0 at the bottom) is.
+MODE "animation": the same Rendered viewport, then Ctrl-F12 (``render.render`` invoked
+as the shortcut does: a render job beside the running viewport) writes the scene's
+frames; once Blender reports the job complete, the viewport must still finish an image.
+``OUT_DIR/probe.json`` records the handler calls and the viewport's last image.
 MODE "panels": the Relativity panels (scene, camera with its motion from the animation,
 object), each captured with the Properties editor's rectangle, for the README.
 """
@@ -101,6 +105,9 @@ def wait_viewport():
     if not done:
         view_area().tag_redraw()
         return 0.5
+    if "then" in STATE:  # MODE "animation": Ctrl-F12 next
+        bpy.app.timers.register(STATE.pop("then"), first_interval=0.1)
+        return None
     import numpy as np
 
     np.save(os.path.join(OUT, "view.npy"), done[-1].rgba)
@@ -166,9 +173,72 @@ def shoot_panel(name: str):
     return None
 
 
+def setup_animation():
+    """The viewport first; once it shows an image, Ctrl-F12."""
+    STATE["then"] = start_animation
+    STATE["events"] = []
+    setup_viewport()
+
+
+def _on(event: str):
+    def handler(*_args):
+        STATE["events"].append(event)
+    return handler
+
+
+@guarded
+def start_animation():
+    bpy.app.handlers.render_complete.append(_on("complete"))
+    bpy.app.handlers.render_cancel.append(_on("cancel"))
+    bpy.app.handlers.render_post.append(_on("frame"))
+    with bpy.context.temp_override(window=window()):
+        bpy.ops.render.render("INVOKE_DEFAULT", animation=True)
+    bpy.app.timers.register(wait_animation, first_interval=0.5)
+    return None
+
+
+@guarded
+def wait_animation():
+    """After the render job: a changed setting must restart the viewport, which must
+    finish a new image (it is not stuck behind the render job)."""
+    events = STATE["events"]
+    if "complete" not in events and "cancel" not in events:
+        return 0.5
+    engine = sys.modules[PACKAGE + ".relblend.engine"]
+    STATE["before"] = {id(s.latest()) for s in list(engine._SESSIONS)}
+    scene = bpy.context.scene
+    scene.relray.preview_samples += 1
+    STATE["want"] = scene.relray.preview_samples
+    view_area().tag_redraw()
+    bpy.app.timers.register(wait_view_after, first_interval=0.5)
+    return None
+
+
+@guarded
+def wait_view_after():
+    engine = sys.modules[PACKAGE + ".relblend.engine"]
+    sessions = list(engine._SESSIONS)
+    errors = [str(s.error) for s in sessions if s.error is not None]
+    if errors:
+        fail(f"viewport error after the animation: {errors}")
+        return None
+    new = [i for i in (s.latest() for s in sessions)
+           if i is not None and i.done and id(i) not in STATE["before"]
+           and i.samples == STATE["want"]]
+    if not new:
+        view_area().tag_redraw()
+        return 0.5
+    with open(os.path.join(OUT, "probe.json"), "w") as f:
+        json.dump({"events": STATE["events"], "sessions": len(sessions),
+                   "samples": new[-1].samples}, f)
+    bpy.ops.wm.quit_blender()
+    return None
+
+
 @guarded
 def start():
-    (setup_viewport if MODE == "viewport" else setup_panels)()
+    {"viewport": setup_viewport, "panels": setup_panels,
+     "animation": setup_animation}[MODE]()
 
 
 bpy.app.timers.register(start, first_interval=1.0)
