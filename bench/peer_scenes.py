@@ -139,11 +139,27 @@ def write_soup_ply(triangles: np.ndarray, normals: np.ndarray | None, path: Path
     return path
 
 
+TEXTURE_SLOTS = ("base_color_texture", "roughness_texture", "metallic_texture",
+                 "emission_texture", "normal_texture")
+
+
+def untextured(scene: Scene) -> None:
+    """ValueError when a material has an image texture: the exports carry constant
+    colours only, and would silently drop it."""
+    for m in scene.materials:
+        slots = [k for k in TEXTURE_SLOTS if getattr(m, k, None) is not None]
+        if slots:
+            raise ValueError(f"material {m.name!r}: textures ({', '.join(slots)}) are not "
+                             "exported to the peers")
+
+
 def mitsuba_dict(job: Job, scene: Scene, width: int, height: int, max_depth: int,
                  meshes: list[str], env_file: str = "") -> dict[str, Any]:
     """Mitsuba's scene dict for any Lambert scene: :func:`.mitsuba_peer.scene_dict` with
     PLY meshes (``meshes[i]``: material i's file; vertex normals where relray has shading
-    normals) and, when ``scene.environment`` is set, an ``envmap`` of ``env_file``."""
+    normals) and, when ``scene.environment`` is set, an ``envmap`` of ``env_file``.
+    Textured materials raise ValueError (:func:`untextured`)."""
+    untextured(scene)
     d = mp.scene_dict(job, scene, width, height, max_depth, meshes)
     smooth = scene.normals is not None
     for key, shape in d.items():
@@ -186,7 +202,8 @@ def mitsuba_files(job: Job, scene: Scene, width: int, height: int, folder: Path,
 def cycles_npz(job: Job, scene: Scene, width: int, height: int, path: Path) -> Path:
     """:func:`.cycles_anchor.scene_npz` plus ``normals`` (relray's shading normals) and
     ``environment`` (JSON of the map's file, strength and rotation_z) when the scene has
-    them (read by :mod:`.cycles_worker`)."""
+    them (read by :mod:`.cycles_worker`).  Textured materials raise ValueError."""
+    untextured(scene)
     scene_npz(job, scene, width, height, path)
     with np.load(path) as f:
         data = {k: f[k] for k in f.files}

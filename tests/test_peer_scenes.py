@@ -132,6 +132,19 @@ def test_unsupported_materials_are_refused(env_bench, tmp_path):
         ps.mitsuba_dict(env_bench.job, scene, 8, 8, 4, ["mesh_0.ply"])
 
 
+def test_textured_materials_are_refused_not_dropped(tmp_path):
+    from relray.bench import common as cm
+    from relray.bench import textures
+
+    job = cm.make_job(textures.textured_cornell(tmp_path), tmp_path / "job.toml",
+                      width=8, height=8)
+    bench = cm.RelrayBench(job)
+    with pytest.raises(ValueError, match="base_color_texture"):
+        ps.mitsuba_files(job, bench.scene, 8, 8, tmp_path / "m")
+    with pytest.raises(ValueError, match="textures"):
+        ps.cycles_npz(job, bench.scene, 8, 8, tmp_path / "c.npz")
+
+
 def test_environment_scene_to_cycles(env_bench, tmp_path):
     job, scene = env_bench.job, env_bench.scene
     path = ps.cycles_npz(job, scene, 24, 16, tmp_path / "scene.npz")
