@@ -24,8 +24,10 @@ off (the default indirect clamp of 10 biases), ``light_sampling_threshold = 0``,
 transform 'Standard', fixed thread count, persistent data (the BVH is built once, as
 relray's), ``max_bounces = max_depth - 2`` (relray counts path segments).  Optional keys of the npz
 (:mod:`relray.bench.peer_scenes`): ``normals`` (per-vertex shading normals, set as custom
-normals) and ``environment`` (JSON: ``file``, ``strength``, ``rotation_z``; a world with
-an Environment Texture, see :func:`_world`).
+normals), ``uvs`` (per-corner texture coordinates, a UV map) with a ``texture`` file
+per material (an Image Texture node into the diffuse colour) and ``environment`` (JSON:
+``file``, ``strength``, ``rotation_z``; a world with an Environment Texture, see
+:func:`_world`).
 """
 
 from __future__ import annotations
@@ -76,6 +78,9 @@ def build(spec: dict) -> None:
     me.polygons.foreach_set("use_smooth", np.zeros(len(faces), bool))
     if "normals" in spec:
         _shading_normals(me, spec["normals"])
+    if "uvs" in spec:  # corner 3t + k of the soup is loop 3t + k
+        uv = me.uv_layers.new(name="UVMap")
+        uv.data.foreach_set("uv", np.asarray(spec["uvs"], np.float32).ravel())
     ob = bpy.data.objects.new("relray_scene", me)
     sc.collection.objects.link(ob)
 
@@ -176,6 +181,12 @@ def _material(bpy, m: dict):
     dif = nt.nodes.new("ShaderNodeBsdfDiffuse")
     dif.inputs["Color"].default_value = (*m["base_color"], 1.0)
     dif.inputs["Roughness"].default_value = 0.0
+    if m.get("texture"):  # base colour from the image (sRGB PNG), the mesh's UVs
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = bpy.data.images.load(m["texture"])
+        tex.interpolation = "Linear"
+        tex.extension = "REPEAT"
+        nt.links.new(tex.outputs["Color"], dif.inputs["Color"])
     surface = dif.outputs[0]
     rad = [c * m["emission_strength"] for c in m["emission"]]
     if any(v > 0.0 for v in rad):

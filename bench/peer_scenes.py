@@ -1,4 +1,4 @@
-"""The heavy and the environment-lit benchmark scenes against Mitsuba 3 and Cycles.
+"""The heavy, environment-lit and textured benchmark scenes against Mitsuba 3 and Cycles.
 
     .venv/bin/python -m relray.bench.run --only peer_scenes
 
@@ -8,7 +8,13 @@ Issue 12 item 1 for the scenes after the Cornell box (:mod:`.mitsuba_peer` and
 - ``heavy``: the box with the displaced-grid floor of about a million triangles
   (:func:`.throughput.heavy_job`, max_depth 8);
 - ``environment``: ground, sphere and box lit only by the equirectangular sky + sun map
-  (:mod:`.environment`, max_depth 4; the sphere has smooth shading normals).
+  (:mod:`.environment`, max_depth 4; the sphere has smooth shading normals);
+- ``textured``: the box with base-colour textures (:func:`.textures.textured_cornell`,
+  max_depth 8): Mitsuba ``bitmap`` / Cycles Image Texture on relray's UVs through the
+  texture's UV map (:func:`texture_uvs`; Mitsuba's v runs from the image's top,
+  :data:`MITSUBA_FLIP_V`, checked by :func:`texture_v_check`); the roughness map
+  (Lambert ignores it) and the flat normal map are left out, other textures refused
+  (:func:`exported_textures`).
 
 Each scene is exported from relray's built :class:`~relray.core.scene.geometry.Scene`
 (its triangles, one mesh per material, the same winding):
@@ -49,7 +55,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from relray.bench import common as cm
-from relray.bench import environment, throughput
+from relray.bench import environment, textures, throughput
 from relray.bench import mitsuba_peer as mp
 from relray.bench.cycles_anchor import CyclesWorker, bpy_available, cycles_bounces, scene_npz
 from relray.core.render import frames as render
@@ -57,8 +63,12 @@ from relray.core.scene.description import Job
 from relray.core.scene.geometry import Scene, build_scene
 from relray.core.scene.job import parse_job
 
-SCENES = ("heavy", "environment")
+SCENES = ("heavy", "environment", "textured")
 ENV_UPSAMPLE = 4
+# Mitsuba's bitmap reads texture coordinate v = 0 at the image's top row, relray (and
+# Blender) at its bottom row: the PLY's v is 1 - v (checked on converged images: the
+# textured box's checker and wall noise agree only so)
+MITSUBA_FLIP_V = True
 
 # Mitsuba's envmap frame -> the lab (z up): local (x, y, z) = lab (Y, Z, X), so that
 # atan2(x, -z) = π - φ and acos(y) = θ (module docstring); columns are local axes
@@ -75,6 +85,10 @@ def scene_bench(name: str, tmp: Path, width: int, height: int,
     tmp.mkdir(parents=True, exist_ok=True)
     if name == "heavy":
         job, _ = throughput.heavy_job(tmp, heavy_triangles)
+    elif name == "textured":
+        folder = tmp / "peer_tex"
+        folder.mkdir(exist_ok=True)
+        job = cm.make_job(textures.textured_cornell(folder), folder / "job.toml")
     elif name == "environment":
         folder = tmp / "peer_env"
         folder.mkdir(exist_ok=True)
@@ -115,16 +129,22 @@ def upsampled_map(src: Path, dst: Path, factor: int = ENV_UPSAMPLE) -> Path:
     return dst
 
 
-def write_soup_ply(triangles: np.ndarray, normals: np.ndarray | None, path: Path) -> Path:
+def write_soup_ply(triangles: np.ndarray, normals: np.ndarray | None, path: Path,
+                   uvs: np.ndarray | None = None) -> Path:
     """Triangles (n, 3, 3) as a binary PLY triangle soup (vertex 3t + k is corner k of
-    triangle t, winding kept), with per-vertex normals (n, 3, 3) if given."""
+    triangle t, winding kept), with per-vertex normals (n, 3, 3) and texture
+    coordinates (n, 3, 2) (written as they are) if given."""
     tris = np.asarray(triangles, np.float64)
-    props = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals is not None else [])
+    props = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals is not None else []) + (
+        ["u", "v"] if uvs is not None else [])
     v = np.empty(3 * len(tris), dtype=[(p, "<f4") for p in props])
     for k, p in enumerate("xyz"):
         v[p] = tris[..., k].ravel()
         if normals is not None:
             v["n" + p] = np.asarray(normals, np.float64)[..., k].ravel()
+    if uvs is not None:
+        v["u"] = np.asarray(uvs, np.float64)[..., 0].ravel()
+        v["v"] = np.asarray(uvs, np.float64)[..., 1].ravel()
     f = np.empty(len(tris), dtype=[("n", "u1"), ("i", "<i4", (3,))])
     f["n"] = 3
     f["i"] = np.arange(3 * len(tris), dtype=np.int32).reshape(-1, 3)
@@ -139,18 +159,60 @@ def write_soup_ply(triangles: np.ndarray, normals: np.ndarray | None, path: Path
     return path
 
 
-TEXTURE_SLOTS = ("base_color_texture", "roughness_texture", "metallic_texture",
-                 "emission_texture", "normal_texture")
+def _flat_normal_map(path: Path) -> bool:
+    """True when every texel of the normal map is (0.5, 0.5, 1) to 8-bit precision."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return False
+    try:
+        px = np.asarray(inp.read_image(0, 0, 0, 3, "float"), np.float64)
+    finally:
+        inp.close()
+    return bool(np.all(np.abs(px - (0.5, 0.5, 1.0)) <= 1.0 / 255.0))
 
 
-def untextured(scene: Scene) -> None:
-    """ValueError when a material has an image texture: the exports carry constant
-    colours only, and would silently drop it."""
+def exported_textures(scene: Scene) -> list[Any]:
+    """Per material the base-colour texture the exports carry (None: the constant colour).
+
+    The materials are Lambert (checked by :func:`.mitsuba_peer.scene_dict`), which ignores
+    roughness, so a roughness map is left out; a normal map only when it is flat
+    (:func:`_flat_normal_map`); a metallic or emission texture, a base-colour texture
+    with a factor ≠ 1 or clamped wrapping raise ValueError (not exported)."""
+    out = []
     for m in scene.materials:
-        slots = [k for k in TEXTURE_SLOTS if getattr(m, k, None) is not None]
-        if slots:
-            raise ValueError(f"material {m.name!r}: textures ({', '.join(slots)}) are not "
+        if m.metallic_texture is not None or m.emission_texture is not None:
+            raise ValueError(f"material {m.name!r}: metallic/emission textures are not "
                              "exported to the peers")
+        if m.normal_texture is not None and not _flat_normal_map(m.normal_texture.file):
+            raise ValueError(f"material {m.name!r}: a normal map that is not flat is not "
+                             "exported to the peers")
+        t = m.base_color_texture
+        if t is not None and (tuple(t.factor) != (1.0, 1.0, 1.0, 1.0)
+                              or tuple(t.wrap) != ("repeat", "repeat")):
+            raise ValueError(f"material {m.name!r}: only repeated base-colour textures "
+                             "with factor 1 are exported to the peers")
+        out.append(t)
+    return out
+
+
+def texture_uvs(scene: Scene) -> np.ndarray | None:
+    """(T, 3, 2) texture coordinates of each triangle's corners in its material's
+    base-colour image (the triangle's UVs through the texture's affine map, relray's
+    convention: (0, 0) the image's bottom-left); None without textures."""
+    texs = exported_textures(scene)
+    if all(t is None for t in texs) or scene.uvs is None:
+        return None
+    uv = np.asarray(scene.uvs, np.float64)
+    out = np.zeros_like(uv)
+    ids = np.asarray(scene.material_ids)
+    for i, t in enumerate(texs):
+        if t is None:
+            continue
+        a = np.asarray(t.uv, np.float64)
+        sel = ids == i
+        out[sel, :, 0] = a[0] * uv[sel, :, 0] + a[1] * uv[sel, :, 1] + a[2]
+        out[sel, :, 1] = a[3] * uv[sel, :, 0] + a[4] * uv[sel, :, 1] + a[5]
+    return out
 
 
 def mitsuba_dict(job: Job, scene: Scene, width: int, height: int, max_depth: int,
@@ -158,14 +220,22 @@ def mitsuba_dict(job: Job, scene: Scene, width: int, height: int, max_depth: int
     """Mitsuba's scene dict for any Lambert scene: :func:`.mitsuba_peer.scene_dict` with
     PLY meshes (``meshes[i]``: material i's file; vertex normals where relray has shading
     normals) and, when ``scene.environment`` is set, an ``envmap`` of ``env_file``.
-    Textured materials raise ValueError (:func:`untextured`)."""
-    untextured(scene)
+    A base-colour texture becomes a ``bitmap`` reflectance (sRGB-decoded, bilinear,
+    repeated; the PLY carries the UVs, :func:`texture_uvs`); other textures:
+    :func:`exported_textures`."""
+    texs = exported_textures(scene)
     d = mp.scene_dict(job, scene, width, height, max_depth, meshes)
     smooth = scene.normals is not None
-    for key, shape in d.items():
-        if key.startswith("shape_"):
-            shape["type"] = "ply"
-            shape["face_normals"] = not smooth
+    for i, m in enumerate(scene.materials):
+        shape = d.get(f"shape_{i}_{m.name}")
+        if shape is None:
+            continue
+        shape["type"] = "ply"
+        shape["face_normals"] = not smooth
+        if texs[i] is not None:
+            shape["bsdf"]["bsdf"]["reflectance"] = {
+                "type": "bitmap", "filename": str(texs[i].file), "raw": False,
+                "filter_type": "bilinear", "wrap_mode": "repeat"}
     env = job.scene.environment
     if scene.environment is not None and env is not None:
         if not env_file:
@@ -183,11 +253,16 @@ def mitsuba_files(job: Job, scene: Scene, width: int, height: int, folder: Path,
     folder.mkdir(parents=True, exist_ok=True)
     ids = np.asarray(scene.material_ids)
     tris = np.asarray(scene.triangles)
+    uvs = texture_uvs(scene)
+    if uvs is not None and MITSUBA_FLIP_V:
+        uvs = uvs.copy()
+        uvs[..., 1] = 1.0 - uvs[..., 1]
     meshes = []
     for i in range(len(scene.materials)):
         sel = ids == i
         normals = None if scene.normals is None else np.asarray(scene.normals)[sel]
-        meshes.append(write_soup_ply(tris[sel], normals, folder / f"mesh_{i}.ply").name
+        meshes.append(write_soup_ply(tris[sel], normals, folder / f"mesh_{i}.ply",
+                                     None if uvs is None else uvs[sel]).name
                       if sel.any() else "")
     env_file = ""
     if job.scene.environment is not None and scene.environment is not None:
@@ -202,11 +277,20 @@ def mitsuba_files(job: Job, scene: Scene, width: int, height: int, folder: Path,
 def cycles_npz(job: Job, scene: Scene, width: int, height: int, path: Path) -> Path:
     """:func:`.cycles_anchor.scene_npz` plus ``normals`` (relray's shading normals) and
     ``environment`` (JSON of the map's file, strength and rotation_z) when the scene has
-    them (read by :mod:`.cycles_worker`).  Textured materials raise ValueError."""
-    untextured(scene)
+    them (read by :mod:`.cycles_worker`), and for base-colour textures ``uvs``
+    (:func:`texture_uvs`) and each material's ``texture`` file (other textures:
+    :func:`exported_textures`)."""
+    texs = exported_textures(scene)
     scene_npz(job, scene, width, height, path)
     with np.load(path) as f:
         data = {k: f[k] for k in f.files}
+    uvs = texture_uvs(scene)
+    if uvs is not None:
+        data["uvs"] = uvs
+        mats = json.loads(str(data["materials"]))
+        for m, t in zip(mats, texs, strict=True):
+            m["texture"] = "" if t is None else str(t.file)
+        data["materials"] = np.array(json.dumps(mats))
     if scene.normals is not None:
         data["normals"] = np.asarray(scene.normals, np.float64)
     env = job.scene.environment
@@ -261,6 +345,8 @@ class PeerScenesConfig:
     env_upsample: int = ENV_UPSAMPLE  # recorded: the factor of :func:`upsampled_map`
     orientation_size: int = 64  # the map orientation check (:func:`orientation_check`)
     orientation_spp: int = 256
+    texture_check_size: int = 200  # the texture-coordinate check (:func:`texture_v_check`)
+    texture_check_spp: int = 64
     variants: tuple[str, ...] = mp.VARIANTS
     cycles: bool = True
 
@@ -416,7 +502,9 @@ def orientation_check(tmp: Path, size: int, spp: int, threads: int = 2,
     rows = []
 
     def row(peer: str, rot: float, img: np.ndarray) -> dict[str, Any]:
-        return {"peer": peer, "rotation_deg": rot, "size": size, "spp": spp,
+        return {"check": "envmap frame", "peer": peer,
+                "setting": f"map turned by {rot:g}°" + (" (the export)" if rot == 0 else ""),
+                "size": size, "spp": spp,
                 "luminance_ratio": cm.mean_luminance(ref) / cm.mean_luminance(img),
                 "de00_mean": cm.mean_de00(ref, img)}
 
@@ -444,6 +532,39 @@ def orientation_check(tmp: Path, size: int, spp: int, threads: int = 2,
                                                      seed=1)[0]))
         finally:
             cy.close()
+    return rows
+
+
+def texture_v_check(tmp: Path, size: int, spp: int, threads: int = 2,
+                    log=print) -> list[dict[str, Any]]:
+    """Mitsuba's texture coordinate convention checked on images, not assumed: the
+    textured box in direct light at ``size``² (large enough to resolve its checker),
+    relray against Mitsuba ``scalar_spectral`` with the PLY's v flipped
+    (:data:`MITSUBA_FLIP_V`, the export) and not flipped."""
+    global MITSUBA_FLIP_V
+    bench = scene_bench("textured", tmp / "texture_v", size, size)
+    ref = bench.render(spp=spp, threads=threads, max_depth=2, seed=1).rgb
+    rows = []
+    if mp.unavailable("scalar_spectral") is not None:
+        return rows
+    export = MITSUBA_FLIP_V
+    try:
+        for flip in (export, not export):
+            MITSUBA_FLIP_V = flip
+            f = mitsuba_files(bench.job, bench.scene, size, size,
+                              tmp / "texture_v" / f"mitsuba_{flip}")
+            with mp.MitsubaWorker("scalar_spectral", f, log=tmp / "peer_texture_v.log") as w:
+                img = w.render(spp, tmp / "peer_texture_v.npy", threads=threads,
+                               max_depth=2, seed=1)[0]
+            rows.append({"check": "texture v", "peer": "scalar_spectral",
+                         "setting": f"v {'flipped' if flip else 'kept'}"
+                         + (" (the export)" if flip == export else ""),
+                         "size": size, "spp": spp,
+                         "luminance_ratio": cm.mean_luminance(ref) / cm.mean_luminance(img),
+                         "de00_mean": cm.mean_de00(ref, img)})
+            log(f"  texture v {rows[-1]['setting']}: ΔE00 {rows[-1]['de00_mean']:.2f}")
+    finally:
+        MITSUBA_FLIP_V = export
     return rows
 
 
@@ -480,5 +601,8 @@ def run(cfg: PeerScenesConfig, tmp: Path, log=print) -> dict[str, Any]:
     res["orientation"] = (orientation_check(tmp, cfg.orientation_size, cfg.orientation_spp,
                                             cfg.ref_threads, log=log)
                           if "environment" in cfg.scenes and cfg.orientation_spp else [])
+    if "textured" in cfg.scenes and cfg.orientation_spp:
+        res["orientation"] += texture_v_check(tmp, cfg.texture_check_size,
+                                              cfg.texture_check_spp, cfg.ref_threads, log)
     res["config"] = asdict(cfg)
     return res

@@ -257,6 +257,8 @@ def write(out: Path, md: Path) -> Path:
         plots["mitsuba_converged"] = out / "mitsuba_converged.png"
     if (out / "peer_converged.png").exists() and d["peer_status"]:
         plots["peer_converged"] = out / "peer_converged.png"
+    if (out / "peer_converged_textured.png").exists() and d["peer_status"]:
+        plots["peer_converged_textured"] = out / "peer_converged_textured.png"
     text = _markdown(meta, d, plots, out, md)
     md.parent.mkdir(parents=True, exist_ok=True)
     md.write_text(text)
@@ -757,7 +759,7 @@ def peer_goals(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
 
 
 def _section_peer_scenes(add, d, plots, md, meta) -> None:
-    add("### The heavy and the environment-lit scenes against Mitsuba 3 and Cycles\n")
+    add("### The heavy, environment-lit and textured scenes against Mitsuba 3 and Cycles\n")
     st = d["peer_status"]
     sec = meta.get("sections", {}).get("peer_scenes", {})
     cfg = sec.get("config", {})
@@ -774,7 +776,14 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
         f"({cfg.get('heavy_triangles', 0):,} triangles asked; `throughput.heavy_job`), "
         "max_depth 8; **environment** = ground, sphere (smooth shading normals) and box, "
         "grey Lambert, lit only by the 256 × 128 sky + sun EXR of `bench/environment.py`, "
-        "max_depth 4. Settings as for the Cornell box above (NEE + MIS, `rr_depth` 4, box "
+        "max_depth 4; **textured** = the Cornell box with base-colour textures (`bench/"
+        "textures.py`: a 512² sRGB checker repeated 4× on the white surfaces, colour noise "
+        "on the red and green walls), max_depth 8, exported as Mitsuba `bitmap` "
+        "reflectances (sRGB-decoded, bilinear, repeat) and Cycles Image Textures "
+        "('Linear') on relray's UVs through each texture's UV map (relray filters "
+        "trilinearly from its mip pyramid; the blocks' roughness map, which Lambert "
+        "ignores, and their flat normal map are left out; any other texture is refused). "
+        "Settings as for the Cornell box above (NEE + MIS, `rr_depth` 4, box "
         "filter 1 px, the same camera, two-sided Lambert from the same RGB), with the "
         "meshes as binary PLY triangle soups (vertex normals where relray has shading "
         "normals). The map: Cycles gets the same EXR as an Environment Texture world "
@@ -786,11 +795,17 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
         "equirect orientation).\n")
     orient = d["peer_orientation"]
     if orient:
-        add(f"The orientation is checked on converged images, not assumed "
-            f"(`peer_scenes.orientation_check`: direct light, {orient[0]['size']}², "
-            f"{orient[0]['spp']} spp): relray against Mitsuba with the map in that frame "
-            "and turned about +Z (only 0° is the export), and against Cycles:\n")
-        add(table(orient, [("peer", "peer", ""), ("map turned by", "rotation_deg", "g"),
+        add("Conventions checked on images, not assumed, in direct light: the map's frame "
+            "(`peer_scenes.orientation_check`, the environment scene: relray against "
+            "Mitsuba with the map in that frame and turned about +Z, and against Cycles) "
+            "and, for the textured box, Mitsuba's texture v (`texture_v_check`: v = 0 at "
+            "the image's top row in Mitsuba, at its bottom row in relray and Blender). The "
+            "export is the setting with the smallest ΔE00:\n")
+        add(table(orient, [("check", lambda r: r.get("check", "envmap frame"), ""),
+                           ("peer", "peer", ""),
+                           ("setting", lambda r: r.get("setting") or
+                            f"map turned by {r.get('rotation_deg', 0):g}°", ""),
+                           ("size, spp", lambda r: f"{r['size']}², {r['spp']}", ""),
                            ("luminance ratio relray / peer", "luminance_ratio", ".3f"),
                            ("mean ΔE00", "de00_mean", ".2f")]))
         add("")
@@ -804,6 +819,7 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
             f"{cfg.get('ref_spp')} spp each at {cfg.get('ref_threads')} threads, another "
             "seed than the ladder; the references' own noise is in the ΔE00):\n")
         _img(add, plots, "peer_converged", md, "heavy and environment scenes, converged")
+        _img(add, plots, "peer_converged_textured", md, "textured scene, converged")
         add(table(cc, [("scene", "scene", ""), ("peer", "variant", ""), ("light", "light", ""),
                        ("luminance ratio relray / peer", "luminance_ratio", ".4f"),
                        ("mean R, G, B ratio", lambda r:

@@ -10,9 +10,9 @@ sweep), ``skips`` (the skip table), ``moving`` (the cost of velocity groups),
 Cycles, adaptive sampling), ``mitsuba`` (Mitsuba 3 ``scalar_spectral`` and
 ``llvm_ad_spectral`` as peers: converged agreement, equal-error CPU time and paths per
 CPU-second at 1 thread; Mitsuba runs in its own venv from ``make mitsuba-venv``, a
-variant that cannot start is reported with its reason), ``peer_scenes`` (the heavy and
-the environment-lit scenes against Mitsuba 3 and Cycles, and the heavy mesh's load + BVH
-time against Mitsuba's).  Cycles needs ``bpy`` (5.0.1)
+variant that cannot start is reported with its reason), ``peer_scenes`` (the heavy,
+the environment-lit and the textured scenes against Mitsuba 3 and Cycles, and the heavy
+mesh's load + BVH time against Mitsuba's).  Cycles needs ``bpy`` (5.0.1)
 in the environment; without it the Cycles series are left out and RESULTS.md says so.
 Generated meshes and cached references go to ``OUT/tmp`` (git-ignored).
 ``python -m relray.bench.report --out OUT`` rewrites the plots and RESULTS.md from the
@@ -321,7 +321,11 @@ def _run_peer_scenes(plan: Plan, out: Path, tmp: Path, use_cycles: bool, use_mit
     for name in ("status", "converged", "raw", "medians", "equal_error", "load_raw", "load",
                  "orientation"):
         cm.write_csv(out / f"peer_{name}.csv", res[name])
-    report.plot_peer_converged(res["refs"], out / "peer_converged.png")
+    report.plot_peer_converged({k: v for k, v in res["refs"].items()
+                                if not k.startswith("textured_")}, out / "peer_converged.png")
+    report.plot_peer_converged({k: v for k, v in res["refs"].items()
+                                if k.startswith("textured_")},
+                               out / "peer_converged_textured.png")
     done("peer_scenes", config=res["config"], simd=mitsuba_peer.simd())
 
 

@@ -132,17 +132,75 @@ def test_unsupported_materials_are_refused(env_bench, tmp_path):
         ps.mitsuba_dict(env_bench.job, scene, 8, 8, 4, ["mesh_0.ply"])
 
 
-def test_textured_materials_are_refused_not_dropped(tmp_path):
+@pytest.fixture(scope="module")
+def tex_bench(tmp_path_factory):
+    return ps.scene_bench("textured", tmp_path_factory.mktemp("tex"), 16, 16)
+
+
+def test_textured_scene_to_mitsuba(tex_bench, tmp_path):
+    job, scene = tex_bench.job, tex_bench.scene
+    d = json.loads(ps.mitsuba_files(job, scene, 16, 16, tmp_path).read_text())
+    ids = np.asarray(scene.material_ids)
+    uv = np.asarray(scene.uvs, np.float64)
+    for i, m in enumerate(scene.materials):
+        sh = d[f"shape_{i}_{m.name}"]
+        refl = sh["bsdf"]["bsdf"]["reflectance"]
+        props, v, faces = _read_ply(tmp_path / sh["filename"])
+        assert props == ["x", "y", "z", "u", "v"]
+        if m.base_color_texture is None:
+            assert refl["type"] == "rgb"
+            continue
+        assert refl == {"type": "bitmap", "filename": str(m.base_color_texture.file),
+                        "raw": False, "filter_type": "bilinear", "wrap_mode": "repeat"}
+        # the job's uv_scale (4 on the white surfaces, 1 on the walls), then Mitsuba's v
+        scale = 4.0 if m.name == "white" else 1.0
+        corners = v[faces]
+        assert corners[..., 3] == pytest.approx(scale * uv[ids == i, :, 0], abs=1e-5)
+        assert corners[..., 4] == pytest.approx(1.0 - scale * uv[ids == i, :, 1], abs=1e-5)
+    names = {m.name: m for m in scene.materials}
+    assert names["white"].base_color_texture.file.name == "checker.png"
+    assert names["red"].base_color_texture.file.name == "noise.png"
+    # Lambert ignores the roughness map; the normal map is flat: neither is exported
+    assert names["white"].roughness_texture is not None
+    assert names["white"].normal_texture is not None
+
+
+def test_textured_scene_to_cycles(tex_bench, tmp_path):
+    job, scene = tex_bench.job, tex_bench.scene
+    path = ps.cycles_npz(job, scene, 16, 16, tmp_path / "scene.npz")
+    with np.load(path) as f:
+        assert f["uvs"] == pytest.approx(ps.texture_uvs(scene))
+        mats = json.loads(str(f["materials"]))
+    for m, spec in zip(mats, scene.materials, strict=True):
+        t = spec.base_color_texture
+        assert m["texture"] == ("" if t is None else str(t.file))
+    ids = np.asarray(scene.material_ids)
+    white = [i for i, m in enumerate(scene.materials) if m.name == "white"][0]
+    assert ps.texture_uvs(scene)[ids == white] == pytest.approx(
+        4.0 * np.asarray(scene.uvs, np.float64)[ids == white])
+
+
+def test_textures_that_would_be_dropped_are_refused(tmp_path):
     from relray.bench import common as cm
     from relray.bench import textures
 
-    job = cm.make_job(textures.textured_cornell(tmp_path), tmp_path / "job.toml",
-                      width=8, height=8)
-    bench = cm.RelrayBench(job)
-    with pytest.raises(ValueError, match="base_color_texture"):
-        ps.mitsuba_files(job, bench.scene, 8, 8, tmp_path / "m")
-    with pytest.raises(ValueError, match="textures"):
-        ps.cycles_npz(job, bench.scene, 8, 8, tmp_path / "c.npz")
+    data = textures.textured_cornell(tmp_path)
+    textures.write_png(tmp_path / "tilted.png", np.tile([0.7, 0.5, 0.9], (8, 8, 1)))
+    for m in data["materials"]:
+        if m["name"] == "white":
+            m["normal_texture"] = "tilted.png"
+    bench = cm.RelrayBench(cm.make_job(data, tmp_path / "job.toml", width=8, height=8))
+    with pytest.raises(ValueError, match="normal map"):
+        ps.mitsuba_files(bench.job, bench.scene, 8, 8, tmp_path / "m")
+    with pytest.raises(ValueError, match="normal map"):
+        ps.cycles_npz(bench.job, bench.scene, 8, 8, tmp_path / "c.npz")
+    data = textures.textured_cornell(tmp_path)
+    for m in data["materials"]:
+        if m["name"] == "red":
+            m["emission_texture"] = "noise.png"
+    bench = cm.RelrayBench(cm.make_job(data, tmp_path / "job.toml", width=8, height=8))
+    with pytest.raises(ValueError, match="emission"):
+        ps.mitsuba_files(bench.job, bench.scene, 8, 8, tmp_path / "m2")
 
 
 def test_environment_scene_to_cycles(env_bench, tmp_path):
