@@ -925,6 +925,19 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
                           ("target", "target", ""), ("measured", "measured", ""),
                           ("met", lambda r: "yes" if r["met"] else "**no**", "")]))
         add("")
+        for scene in dict.fromkeys(g["scene"] for g in goals):
+            gs = [g for g in goals if g["scene"] == scene]
+            met = [g["goal"] for g in gs if g["met"]]
+            unmet = [g["goal"] for g in gs if not g["met"]]
+            add(f"- **{scene}**: met {len(met)} of {len(gs)}"
+                + (f" ({'; '.join(met)})" if met else "")
+                + (f"; not met: {'; '.join(unmet)}" if unmet else "")
+                + (" (but see the caveat on texture prefiltering)"
+                   if scene == "textured" and met else "") + ".")
+        add("")
+        add("The load times are wall times on the shared machine (each run's load average "
+            "is in `peer_load_raw.csv`), so both sides are slower than on an idle one; "
+            "they ran interleaved, so the ratio is the figure to read.\n")
 
 
 def _section_throughput(add, d, plots, md, meta) -> None:
@@ -1526,20 +1539,20 @@ def _section_missing(add, d, meta) -> None:
             "section (see its busy-loop share), so the ≥ 1.8× goal could not be checked; "
             "rerun `python -m relray.bench.run --only scaling` when `uptime` shows a load "
             "below 0.5.")
-    add("- Only the Cornell box is compared with Cycles (Lambert + RGB emitters); glossy, "
-        "glass, analytic lights and the sky are not exported to Cycles yet "
-        "(`bench/cycles_anchor.py` raises for them).")
+    add("- Cycles and Mitsuba 3 get Lambert + RGB emitters, an equirectangular map and "
+        "base-colour textures (`bench/cycles_anchor.py`, `bench/mitsuba_peer.py`, "
+        "`bench/peer_scenes.py`); glossy, glass, analytic lights, a constant sky and "
+        "other textures are not exported yet (the exports raise for them).")
     st = d["mitsuba_status"]
     if st:
         for r in st:
             if r["ran"] not in (True, "True"):
                 add(f"- Mitsuba `{r['variant']}` did not run: {r['reason']}.")
-        add("- Mitsuba 3 and Cycles are compared on the Cornell box, the heavy and the "
-            "environment-lit scenes (Lambert + RGB emitters + an equirectangular map); the "
-            "textured and moving scenes of issue 12 item 1 are not exported to the peers "
-            "yet.")
-    add("- Each comparison uses one scene; error against time on the heavy scene and at "
-        "β ≠ 0 (where Cycles has no counterpart) is not measured.")
+        add("- Mitsuba 3 and Cycles are compared on the Cornell box, the heavy, the "
+            "environment-lit and the textured scenes; the moving scene of issue 12 item 1 "
+            "is not exported to the peers (neither has relray's relativistic motion).")
+    add("- Error against time at β ≠ 0 (where the peers have no counterpart) is not "
+        "measured.")
     add("")
 
 
