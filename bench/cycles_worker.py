@@ -22,7 +22,12 @@ Settings that make Cycles comparable with relray (each is a Cycles default chang
 noise is added to the result), pixel filter BOX of width 1 px (relray's box), clamping
 off (the default indirect clamp of 10 biases), ``light_sampling_threshold = 0``, view
 transform 'Standard', fixed thread count, persistent data (the BVH is built once, as
-relray's), ``max_bounces = max_depth - 2`` (relray counts path segments).
+relray's), ``max_bounces = max_depth - 2`` (relray counts path segments).  Optional keys of the npz
+(:mod:`relray.bench.peer_scenes`): ``normals`` (per-vertex shading normals, set as custom
+normals), ``uvs`` (per-corner texture coordinates, a UV map) with a ``texture`` file
+per material (an Image Texture node into the diffuse colour) and ``environment`` (JSON:
+``file``, ``strength``, ``rotation_z``; a world with an Environment Texture, see
+:func:`_world`).
 """
 
 from __future__ import annotations
@@ -71,6 +76,11 @@ def build(spec: dict) -> None:
         me.materials.append(_material(bpy, m))
     me.polygons.foreach_set("material_index", spec["material_ids"].astype(np.int32))
     me.polygons.foreach_set("use_smooth", np.zeros(len(faces), bool))
+    if "normals" in spec:
+        _shading_normals(me, spec["normals"])
+    if "uvs" in spec:  # corner 3t + k of the soup is loop 3t + k
+        uv = me.uv_layers.new(name="UVMap")
+        uv.data.foreach_set("uv", np.asarray(spec["uvs"], np.float32).ravel())
     ob = bpy.data.objects.new("relray_scene", me)
     sc.collection.objects.link(ob)
 
@@ -90,6 +100,8 @@ def build(spec: dict) -> None:
     # no world: a new World in 5.0 has a Background node of grey 0.05, which would light
     # the box through its open front; without one, Cycles' background is black
     sc.world = None
+    if "environment" in spec:
+        sc.world = _world(bpy, json.loads(str(spec["environment"])))
 
     r = sc.render
     r.engine = "CYCLES"
@@ -121,6 +133,43 @@ def build(spec: dict) -> None:
     c.film_exposure = 1.0
 
 
+def _shading_normals(me, normals: np.ndarray) -> None:
+    """relray's per-vertex shading normals (T, 3, 3) as the mesh's custom normals, one per
+    face corner (the mesh is a triangle soup: corner 3t + k is vertex k of triangle t)."""
+    me.polygons.foreach_set("use_smooth", np.ones(len(me.polygons), bool))
+    me.normals_split_custom_set(np.asarray(normals, np.float64).reshape(-1, 3).tolist())
+    me.update()
+
+
+def _world(bpy, env: dict):
+    """A world lit by relray's equirectangular map: Environment Texture (equirectangular,
+    'Closest' = relray's nearest texel for lit surfaces) × ``strength``; relray's map
+    directions are Blender's, ``rotation_z`` ρ adds to relray's azimuth, i.e. the lookup
+    vector turns by −ρ (a Mapping node)."""
+    w = bpy.data.worlds.new("relray_environment")
+    if not w.node_tree:  # Blender < 5 needs use_nodes
+        w.use_nodes = True
+    nt = w.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputWorld")
+    bg = nt.nodes.new("ShaderNodeBackground")
+    tex = nt.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(env["file"])
+    tex.interpolation = "Closest"
+    tex.projection = "EQUIRECTANGULAR"
+    bg.inputs["Strength"].default_value = float(env["strength"])
+    if env.get("rotation_z", 0.0):
+        coord = nt.nodes.new("ShaderNodeTexCoord")
+        mapping = nt.nodes.new("ShaderNodeMapping")
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0,
+                                                    -math.radians(env["rotation_z"]))
+        nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+        nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    nt.links.new(bg.outputs["Background"], out.inputs["Surface"])
+    return w
+
+
 def _material(bpy, m: dict):
     """A Cycles material equal to relray's Lambert + optional RGB emitter."""
     mat = bpy.data.materials.new(m["name"])
@@ -132,6 +181,12 @@ def _material(bpy, m: dict):
     dif = nt.nodes.new("ShaderNodeBsdfDiffuse")
     dif.inputs["Color"].default_value = (*m["base_color"], 1.0)
     dif.inputs["Roughness"].default_value = 0.0
+    if m.get("texture"):  # base colour from the image (sRGB PNG), the mesh's UVs
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = bpy.data.images.load(m["texture"])
+        tex.interpolation = "Linear"
+        tex.extension = "REPEAT"
+        nt.links.new(tex.outputs["Color"], dif.inputs["Color"])
     surface = dif.outputs[0]
     rad = [c * m["emission_strength"] for c in m["emission"]]
     if any(v > 0.0 for v in rad):

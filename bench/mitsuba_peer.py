@@ -189,6 +189,7 @@ class MitsubaWorker:
         self.log_path = log
         self.proc: subprocess.Popen | None = None
         self.version = "?"
+        self.load_s = float("nan")  # seconds the worker took to load the scene (setup)
 
     def __enter__(self) -> MitsubaWorker:
         self.start()
@@ -212,7 +213,8 @@ class MitsubaWorker:
             self.close()
             raise RuntimeError(hello["error"])
         self.version = hello.get("version", "?")
-        self._call({"cmd": "setup", "scene": str(self.scene_file)})
+        self.load_s = float(self._call({"cmd": "setup", "scene": str(self.scene_file)})
+                            .get("load_s", "nan"))
 
     def _read(self) -> dict[str, Any]:
         assert self.proc is not None and self.proc.stdout is not None

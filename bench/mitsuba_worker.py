@@ -7,7 +7,10 @@ meet).  One JSON command per line on stdin; one reply per command, a line starti
 ``@@MITSUBA@@`` on the original stdout (Mitsuba's log goes to stderr):
 
 - ``{"cmd": "setup", "scene": "scene.json"}`` loads the scene dict written by
-  :func:`relray.bench.mitsuba_peer.scene_files` (meshes as OBJ files beside it);
+  :func:`relray.bench.mitsuba_peer.scene_files` or :mod:`relray.bench.peer_scenes`
+  (meshes as OBJ or PLY files, an envmap's EXR, paths relative to the spec; a
+  ``to_world_matrix`` (4 × 4 rows) becomes the plugin's ``to_world``) and replies with
+  ``load_s``, the wall seconds of loading it (reading the meshes, building the BVH);
 - ``{"cmd": "render", "spp": 64, "seed": 0, "threads": 1, "max_depth": 8,
   "out": "img.npy"}`` renders (the scene's integrator with ``max_depth`` replaced), saves
   the linear Rec.709 image (float32 (h, w, 3), row 0 = top) and replies with ``wall``
@@ -55,8 +58,10 @@ def load(mi, spec_file: str):
                                                         target=look["target"],
                                                         up=look["up"])
     for v in spec.values():
-        if isinstance(v, dict) and v.get("type") == "obj":
+        if isinstance(v, dict) and "filename" in v:  # obj, ply and envmap files
             v["filename"] = os.path.join(base, v["filename"])
+        if isinstance(v, dict) and "to_world_matrix" in v:  # e.g. the envmap's frame
+            v["to_world"] = mi.ScalarTransform4f(v.pop("to_world_matrix"))
     return mi.load_dict(spec), spec["integrator"]
 
 
@@ -107,9 +112,10 @@ def main() -> None:
         cmd = json.loads(line)
         try:
             if cmd["cmd"] == "setup":
+                t0 = time.perf_counter()
                 scene, spec = load(mi, cmd["scene"])
                 integrators = {}
-                out = {"ok": True}
+                out = {"ok": True, "load_s": time.perf_counter() - t0}
             elif cmd["cmd"] == "render":
                 depth = int(cmd.get("max_depth", spec["max_depth"]))
                 if depth not in integrators:

@@ -10,7 +10,9 @@ sweep), ``skips`` (the skip table), ``moving`` (the cost of velocity groups),
 Cycles, adaptive sampling), ``mitsuba`` (Mitsuba 3 ``scalar_spectral`` and
 ``llvm_ad_spectral`` as peers: converged agreement, equal-error CPU time and paths per
 CPU-second at 1 thread; Mitsuba runs in its own venv from ``make mitsuba-venv``, a
-variant that cannot start is reported with its reason).  Cycles needs ``bpy`` (5.0.1)
+variant that cannot start is reported with its reason), ``peer_scenes`` (the heavy,
+the environment-lit and the textured scenes against Mitsuba 3 and Cycles, and the heavy
+mesh's load + BVH time against Mitsuba's).  Cycles needs ``bpy`` (5.0.1)
 in the environment; without it the Cycles series are left out and RESULTS.md says so.
 Generated meshes and cached references go to ``OUT/tmp`` (git-ignored).
 ``python -m relray.bench.report --out OUT`` rewrites the plots and RESULTS.md from the
@@ -35,6 +37,7 @@ from relray.bench import (
     environment,
     first_render,
     mitsuba_peer,
+    peer_scenes,
     profile_scenes,
     report,
     skips,
@@ -44,7 +47,7 @@ from relray.bench import (
 )
 
 SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "environment",
-            "textures", "first", "profiles", "convergence", "mitsuba")
+            "textures", "first", "profiles", "convergence", "mitsuba", "peer_scenes")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -92,6 +95,8 @@ class Plan:
     probe_s: float = 0.4
     conv: convergence.ConvergenceConfig = field(default_factory=convergence.ConvergenceConfig)
     mitsuba: mitsuba_peer.MitsubaConfig = field(default_factory=mitsuba_peer.MitsubaConfig)
+    peers: peer_scenes.PeerScenesConfig = field(
+        default_factory=peer_scenes.PeerScenesConfig)
 
 
 FULL = Plan("full")
@@ -109,7 +114,11 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
                                                 ref_factor=8),
              mitsuba=mitsuba_peer.MitsubaConfig(width=64, height=64, spp=[4, 16, 64],
                                                 repeats=2, ref_spp=1024, tp_size=128,
-                                                tp_spp=4, tp_repeats=2))
+                                                tp_spp=4, tp_repeats=2),
+             peers=peer_scenes.PeerScenesConfig(width=48, height=48, spp=[4, 16],
+                                                repeats=2, ref_spp=256,
+                                                heavy_triangles=200_000, load_repeats=1,
+                                                orientation_size=32, orientation_spp=64))
 SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repeat=1,
              profile_size=8, profile_spp=1,
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
@@ -123,7 +132,11 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
                                                 thresholds=[0.5], repeats=1, ref_factor=2),
              mitsuba=mitsuba_peer.MitsubaConfig(width=8, height=8, spp=[4, 16], repeats=1,
                                                 ref_spp=64, ref_threads=1, tp_size=8,
-                                                tp_spp=4, tp_repeats=1))
+                                                tp_spp=4, tp_repeats=1),
+             peers=peer_scenes.PeerScenesConfig(width=8, height=8, spp=[4, 16], repeats=1,
+                                                ref_spp=16, ref_threads=1,
+                                                heavy_triangles=20_000, load_repeats=1,
+                                                orientation_spp=0))
 
 
 def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECTIONS,
@@ -277,6 +290,8 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         report.plot_mitsuba_converged(res["refs"], out / "mitsuba_converged.png")
         done("mitsuba", config=res["config"], simd=mitsuba_peer.simd(),
              versions={r["variant"]: r["version"] for r in res["status"]})
+    if "peer_scenes" in sections:
+        _run_peer_scenes(plan, out, tmp, use_cycles, use_mitsuba, section, done, log)
     meta["cpu_share_end"] = cm.cpu_share(seconds=plan.probe_s)
     meta["load_end"] = cm.load_average()
     meta["total_seconds"] = time.perf_counter() - t_start
@@ -286,6 +301,32 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         log(f"wrote {md}")
     log(f"done in {meta['total_seconds']:.0f} s")
     return meta
+
+
+def _run_peer_scenes(plan: Plan, out: Path, tmp: Path, use_cycles: bool, use_mitsuba: bool,
+                     section, done, log) -> None:
+    """The ``peer_scenes`` section: the heavy and environment-lit scenes against Mitsuba 3
+    and Cycles (:mod:`.peer_scenes`), CSVs ``peer_*.csv`` and ``peer_converged.png``."""
+    section("peer_scenes")
+    cfg = plan.peers
+    if not use_mitsuba:
+        cfg = replace(cfg, variants=())
+    if not use_cycles:
+        cfg = replace(cfg, cycles=False)
+    res = peer_scenes.run(cfg, tmp, log=log)
+    if not use_mitsuba:
+        res["status"] += [{"scene": s, "peer": v, "ran": False,
+                           "reason": "left out (--no-mitsuba)", "version": ""}
+                          for s in cfg.scenes for v in mitsuba_peer.VARIANTS]
+    for name in ("status", "converged", "raw", "medians", "equal_error", "load_raw", "load",
+                 "orientation"):
+        cm.write_csv(out / f"peer_{name}.csv", res[name])
+    report.plot_peer_converged({k: v for k, v in res["refs"].items()
+                                if not k.startswith("textured_")}, out / "peer_converged.png")
+    report.plot_peer_converged({k: v for k, v in res["refs"].items()
+                                if k.startswith("textured_")},
+                               out / "peer_converged_textured.png")
+    done("peer_scenes", config=res["config"], simd=mitsuba_peer.simd())
 
 
 def main(argv: list[str] | None = None) -> None:
