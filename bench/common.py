@@ -23,6 +23,7 @@ import math
 import os
 import platform
 import statistics
+import subprocess
 import threading
 import time
 import tomllib
@@ -409,3 +410,68 @@ def _parse(v: str) -> Any:
         except ValueError:
             pass
     return v
+
+
+class WorkerProcess:
+    """A peer renderer in a subprocess that answers JSON commands line by line.
+
+    The worker writes one reply per command on its stdout, a line starting with ``mark``
+    followed by a JSON object (its first line, before any command, says hello); a reply
+    with an "error" key is raised as RuntimeError naming ``name``. Subclasses start the
+    process in :meth:`start` (:meth:`_spawn`) and add their commands.
+    """
+
+    def __init__(self, mark: str, name: str, log: Path | None = None):
+        self.mark = mark
+        self.name = name
+        self.log_path = log
+        self.proc: subprocess.Popen | None = None
+        self.version = "?"
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+    def _spawn(self, argv: list[str], env: dict[str, str] | None = None) -> dict[str, Any]:
+        """Start ``argv`` and return its hello."""
+        log = open(self.log_path, "a") if self.log_path else subprocess.DEVNULL  # noqa: SIM115
+        self.proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=log, text=True, bufsize=1, env=env)
+        return self._read()
+
+    def _read(self) -> dict[str, Any]:
+        assert self.proc is not None and self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith(self.mark):
+                return json.loads(line[len(self.mark):])
+        raise RuntimeError(f"the {self.name} stopped (exit {self.proc.wait()}); "
+                           f"see {self.log_path}")
+
+    def _call(self, cmd: dict[str, Any]) -> dict[str, Any]:
+        assert self.proc is not None and self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps(cmd) + "\n")
+        self.proc.stdin.flush()
+        out = self._read()
+        if "error" in out:
+            raise RuntimeError(f"{self.name}: {out['error']}")
+        return out
+
+    def close(self) -> None:
+        """Ask the worker to quit (kill it if it does not)."""
+        if self.proc is None:
+            return
+        try:
+            if self.proc.poll() is None and self.proc.stdin is not None:
+                self.proc.stdin.write(json.dumps({"cmd": "quit"}) + "\n")
+                self.proc.stdin.flush()
+            self.proc.wait(timeout=30)
+        except (OSError, subprocess.TimeoutExpired):
+            self.proc.kill()
+            self.proc.wait()
+        self.proc = None

@@ -15,10 +15,10 @@ import json
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from relray.bench import common as cm
 from relray.core.scene import motion
 from relray.core.scene.description import Job
 from relray.core.scene.geometry import Scene
@@ -82,47 +82,18 @@ def read_exr_rgb(path: Path) -> np.ndarray:
     return np.asarray(px, np.float64)
 
 
-class CyclesWorker:
+class CyclesWorker(cm.WorkerProcess):
     """A bpy subprocess that builds one scene and renders it on demand."""
 
     def __init__(self, scene_file: Path, log: Path | None = None):
+        super().__init__(MARK, "Cycles worker", log)
         self.scene_file = Path(scene_file)
-        self.log_path = log
-        self.proc: subprocess.Popen | None = None
-        self.version = "?"
-
-    def __enter__(self) -> CyclesWorker:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
     def start(self) -> None:
         """Start the worker and build the scene."""
-        log = open(self.log_path, "a") if self.log_path else subprocess.DEVNULL  # noqa: SIM115
-        self.proc = subprocess.Popen([sys.executable, str(WORKER)], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, stderr=log, text=True, bufsize=1)
-        hello = self._read()
+        hello = self._spawn([sys.executable, str(WORKER)])
         self.version = hello.get("version", "?")
         self._call({"cmd": "setup", "scene": str(self.scene_file)})
-
-    def _read(self) -> dict[str, Any]:
-        assert self.proc is not None and self.proc.stdout is not None
-        for line in self.proc.stdout:
-            if line.startswith(MARK):
-                return json.loads(line[len(MARK):])
-        raise RuntimeError(f"the Cycles worker stopped (exit {self.proc.wait()}); "
-                           f"see {self.log_path}")
-
-    def _call(self, cmd: dict[str, Any]) -> dict[str, Any]:
-        assert self.proc is not None and self.proc.stdin is not None
-        self.proc.stdin.write(json.dumps(cmd) + "\n")
-        self.proc.stdin.flush()
-        out = self._read()
-        if "error" in out:
-            raise RuntimeError(f"Cycles worker: {out['error']}")
-        return out
 
     def render(self, spp: int, out: Path, threads: int, max_bounces: int = 6,
                adaptive: bool = False, threshold: float = 0.01,
@@ -135,17 +106,3 @@ class CyclesWorker:
         img = read_exr_rgb(Path(out))
         Path(out).unlink(missing_ok=True)
         return img, float(r["wall"]), float(r["cpu"])
-
-    def close(self) -> None:
-        """Ask the worker to quit (kill it if it does not)."""
-        if self.proc is None:
-            return
-        try:
-            if self.proc.poll() is None and self.proc.stdin is not None:
-                self.proc.stdin.write(json.dumps({"cmd": "quit"}) + "\n")
-                self.proc.stdin.flush()
-            self.proc.wait(timeout=30)
-        except (OSError, subprocess.TimeoutExpired):
-            self.proc.kill()
-            self.proc.wait()
-        self.proc = None

@@ -43,7 +43,6 @@ from __future__ import annotations
 import json
 import os
 import statistics
-import subprocess
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -180,23 +179,14 @@ def scene_files(job: Job, scene: Scene, width: int, height: int, folder: Path,
 
 
 # ----------------------------------------------------------------------------- the worker
-class MitsubaWorker:
+class MitsubaWorker(cm.WorkerProcess):
     """A Mitsuba subprocess (one variant) that loads one scene and renders it on demand."""
 
     def __init__(self, variant: str, scene_file: Path, log: Path | None = None):
+        super().__init__(MARK, f"Mitsuba worker ({variant})", log)
         self.variant = variant
         self.scene_file = Path(scene_file)
-        self.log_path = log
-        self.proc: subprocess.Popen | None = None
-        self.version = "?"
         self.load_s = float("nan")  # seconds the worker took to load the scene (setup)
-
-    def __enter__(self) -> MitsubaWorker:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
     def start(self) -> None:
         """Start the worker and load the scene; RuntimeError says why it cannot."""
@@ -204,34 +194,13 @@ class MitsubaWorker:
         llvm = libllvm()
         if llvm is not None:
             env["DRJIT_LIBLLVM_PATH"] = str(llvm)
-        log = open(self.log_path, "a") if self.log_path else subprocess.DEVNULL  # noqa: SIM115
-        self.proc = subprocess.Popen([str(python()), str(WORKER), self.variant],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=log, text=True, bufsize=1, env=env)
-        hello = self._read()
+        hello = self._spawn([str(python()), str(WORKER), self.variant], env)
         if "error" in hello:
             self.close()
             raise RuntimeError(hello["error"])
         self.version = hello.get("version", "?")
         self.load_s = float(self._call({"cmd": "setup", "scene": str(self.scene_file)})
                             .get("load_s", "nan"))
-
-    def _read(self) -> dict[str, Any]:
-        assert self.proc is not None and self.proc.stdout is not None
-        for line in self.proc.stdout:
-            if line.startswith(MARK):
-                return json.loads(line[len(MARK):])
-        raise RuntimeError(f"the Mitsuba worker ({self.variant}) stopped (exit "
-                           f"{self.proc.wait()}); see {self.log_path}")
-
-    def _call(self, cmd: dict[str, Any]) -> dict[str, Any]:
-        assert self.proc is not None and self.proc.stdin is not None
-        self.proc.stdin.write(json.dumps(cmd) + "\n")
-        self.proc.stdin.flush()
-        out = self._read()
-        if "error" in out:
-            raise RuntimeError(f"Mitsuba worker ({self.variant}): {out['error']}")
-        return out
 
     def render(self, spp: int, out: Path, threads: int = 1, max_depth: int | None = None,
                seed: int = 0) -> tuple[np.ndarray, float, float, int]:
@@ -244,20 +213,6 @@ class MitsubaWorker:
         img = np.load(out).astype(np.float64)
         Path(out).unlink(missing_ok=True)
         return img, float(r["wall"]), float(r["cpu"]), int(r["spp"])
-
-    def close(self) -> None:
-        """Ask the worker to quit (kill it if it does not)."""
-        if self.proc is None:
-            return
-        try:
-            if self.proc.poll() is None and self.proc.stdin is not None:
-                self.proc.stdin.write(json.dumps({"cmd": "quit"}) + "\n")
-                self.proc.stdin.flush()
-            self.proc.wait(timeout=30)
-        except (OSError, subprocess.TimeoutExpired):
-            self.proc.kill()
-            self.proc.wait()
-        self.proc = None
 
 
 # ----------------------------------------------------------------------------- the runs
