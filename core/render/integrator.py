@@ -1154,8 +1154,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
             hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
         if sc.tex.cutouts:  # through the holes of alpha-masked materials: no bounce
             hits = see_through(sc, accel, rays.o[:m], rays.d[:m], rays.t[:m], hits, None)
-        if depth == 0:
-            first_t, first_seg = hits.t, hits.seg.copy()
+        if depth == 0:  # (a MovingScene's hits live in its buffers until its next call)
+            first_t, first_seg = (hits.t.copy() if moving else hits.t), hits.seg.copy()
         if area_lights:
             cross_area_lights(sc, paths, rays, hits, m, depth, nlanes)
         m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen,
