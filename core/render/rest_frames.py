@@ -233,12 +233,16 @@ class MovingScene:
                        none=np.empty(0, np.int64))
         return buf
 
+    def _culling(self) -> bool:
+        """Whether this call tests the rays against the static BVH's box: while fewer
+        than ``CULL_BELOW`` of them met it last time, else every ``RECHECK`` calls."""
+        self._calls += 1
+        return self.static is not None and (self._keep < CULL_BELOW
+                                            or self._calls % RECHECK == 0)
+
     def _cull_static(self, o, d, s_max, buf: dict):
         """The rays that meet the static BVH's box (:func:`box_rays`) as (rows, o, d,
-        tmax), or None when too many of them did lately to make culling pay."""
-        self._calls += 1
-        if self._keep >= CULL_BELOW and self._calls % RECHECK:
-            return None
+        tmax); records the share kept for :meth:`_culling`."""
         acc = self.static
         m = box_rays(o, d, s_max, acc.box_lo, acc.box_hi, buf["rows"], buf["o"], buf["d"],
                      buf["tmax"])
@@ -268,7 +272,7 @@ class MovingScene:
         best, prim, bu, bv = buf["best"][:n], buf["prim"][:n], buf["u"][:n], buf["v"][:n]
         seg_hit = buf["seg"][:n]
         culled = None
-        if self.static is not None:
+        if self._culling():
             best[:] = MISS_DISTANCE  # the rays' lengths for the box test
             culled = self._cull_static(o, d, best, buf)
         if self.static is not None and culled is None:  # every ray: Embree's own arrays
@@ -302,7 +306,7 @@ class MovingScene:
         s_max = buf["s_max"][:n]
         tmax = np.ascontiguousarray(tmax, np.float32)
         none = buf["none"]
-        culled = self._cull_static(o, d, tmax, buf) if self.static is not None else None
+        culled = self._cull_static(o, d, tmax, buf) if self._culling() else None
         if culled is not None:
             rows, o_c, d_c, t_c = culled
             occ = self.static.occluded(o_c, d_c, t_c) if len(rows) else np.empty(0, bool)
