@@ -33,7 +33,9 @@ from render_helpers import (
     zscore,
 )
 
-from relray.core.scene.geometry import scene_from_parts
+from relray.core.physics import spectrum
+from relray.core.render import frames, integrator
+from relray.core.scene.geometry import build_scene, scene_from_parts
 
 RHO = 0.5  # the grey floor (a flat sigmoid spectrum)
 SUN = np.array([0.3, 0.2, -1.0])  # where the sun's light goes
@@ -336,3 +338,53 @@ def test_a_scene_of_area_lights_only_has_no_geometry(tmp_path):
     assert np.all(r.alpha == 0.0)
     np.testing.assert_allclose(r.rgb[inside], P_w / (math.pi * (2 * HALF) ** 2), rtol=1e-5)
     assert np.all(r.rgb[outside] == 0.0)
+
+
+def test_an_area_light_reads_a_pending_doppler_shift_as_the_shifted_lanes(tmp_path):
+    """A ray that left a moving body keeps its lanes' D_out shift pending
+    (``Paths.pend``, integrator.pending_shift) until its next hit; an area light it
+    crosses on the way must see the lab lanes: the same radiance as from lanes shifted
+    at once (lamu + ln(D)·INV_DLOG, its columns, nothing pending), for D above and below
+    1, to float32 rounding. Catches a light read at the body's rest-frame lanes."""
+    light = {"type": "area", "position": [0, 0, 0], "direction": [0, -1, 0], "up": [0, 0, 1],
+             "size": [2 * HALF, 2 * HALF], "power": 20.0}
+    job = make_job(base_job(render={"width": 8, "height": 8, "spp": 1,
+                                    "spectral": "cie1931"},
+                            camera=WALL_CAM, objects=[WALL], lights=[light],
+                            materials=[{"name": "wall", "base_color": [0.5, 0.5, 0.5]}]),
+                   tmp_path)
+    prep = frames.prepare(build_scene(job), "cie1931")
+    sc = prep.kernel
+    n = 64
+    rng = np.random.default_rng(5)
+    aim = np.column_stack([rng.uniform(-0.5, 0.5, n), np.zeros(n), rng.uniform(-0.5, 0.5, n)])
+    x0 = np.array(WALL_CAM["position"], float)
+    d = aim - x0
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = np.ascontiguousarray(np.broadcast_to(x0 - prep.origin, (n, 3)), np.float32)
+    hits = prep.tracer.intersect(o, d.astype(np.float32))
+    lam0 = rng.uniform(400.0, 700.0, (n, 4))
+    lamu0 = spectrum.grid_coordinates(lam0).astype(np.float32)
+    D = rng.choice([0.7, 1.4], n)
+    shift = (np.log(D) * spectrum.INV_DLOG)[:, None]
+
+    def paths(lamu, pend):
+        li, lf = np.empty((n, 4), np.int32), np.empty((n, 4), np.float32)
+        integrator.column_split(lamu, sc.emit.shape[1], li, lf)
+        z = np.zeros(n, np.float32)
+        return integrator.Paths(
+            np.arange(n, dtype=np.uint64), np.zeros((n, 4), np.float32),
+            np.ones((n, 4), np.float32), li, lf, z, np.ones(n, np.int32),
+            np.full(n, -1, np.int32), np.zeros((n, 4), np.float32),
+            np.ascontiguousarray(lamu, np.float32), np.ones(n, np.int32),
+            np.zeros((n, 2), np.float32), np.ascontiguousarray(pend, np.float64))
+
+    rays = integrator.Rays(np.arange(n, dtype=np.int64), o, d.astype(np.float32),
+                           np.zeros(n))
+    hits = hits._replace(seg=np.full(n, -1, np.int32))
+    at_once = paths(lamu0 + shift, np.ones(n))
+    pending = paths(lamu0, D)
+    integrator.cross_area_lights(sc, at_once, rays, hits, n, 0, 4)
+    integrator.cross_area_lights(sc, pending, rays, hits, n, 0, 4)
+    assert np.all(at_once.L.sum(axis=1) > 0.0)  # every ray crossed the light
+    np.testing.assert_allclose(pending.L, at_once.L, rtol=2e-5)

@@ -142,3 +142,43 @@ def test_the_nearest_of_static_and_moving_wins():
     h = ms.intersect(o, d, np.array([7.5, 40.0]))
     assert h.seg.tolist() == [0, -1] and h.prim[0] >= 2
     assert h.t[0] == pytest.approx(7.0, abs=1e-5) and h.t[1] == pytest.approx(20.0, abs=1e-5)
+
+
+@pytest.mark.parametrize("cull", [True, False])
+def test_the_static_box_test_changes_no_hit(cull):
+    """The static BVH traced only for the rays that meet its bounding box (or, when most
+    did lately, for all): the same hits and the same occlusion as the BVH alone, for rays
+    that start inside and outside the box, graze its faces and end short of it."""
+    rng = np.random.default_rng(11)
+    # a small flat light-like quad and a tilted triangle: a thin, off-centre box
+    tris = np.concatenate([
+        shapes.quad(np.array([[-0.5, -0.5, 2.0], [0.5, -0.5, 2.0], [0.5, 0.5, 2.0],
+                              [-0.5, 0.5, 2.0]], np.float64)),
+        np.array([[[1.0, 0.0, 1.0], [1.5, 0.2, 1.4], [1.2, 0.7, 1.1]]])])
+    static = Accel(tris)
+    ms = MovingScene(static, [], static.origin)
+    ms._keep = 0.0 if cull else 1.0
+    n = 4000
+    x0 = rng.uniform(-2.0, 2.0, (n, 3)) + [0.0, 0.0, 1.0]
+    aim = rng.uniform(-1.0, 1.0, (n, 3)) * [1.0, 1.0, 0.0] + [0.0, 0.0, 2.0]
+    d = np.where(rng.uniform(size=(n, 1)) < 0.5, aim - x0, rng.normal(size=(n, 3)))
+    d[: n // 8, 2] = 0.0  # along the quad's plane (rays at z = 2 among them)
+    x0[: n // 16, 2] = 2.0
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o = (x0 - static.origin).astype(np.float32)
+    d = d.astype(np.float32)
+    want = static.intersect(o, d)
+    got = ms.intersect(o, d, np.zeros(n), {})
+    assert (want.prim >= 0).sum() > n // 16 and (want.prim < 0).sum() > n // 16
+    np.testing.assert_array_equal(got.prim, want.prim)
+    np.testing.assert_array_equal(got.t, want.t)
+    np.testing.assert_array_equal(got.u[want.prim >= 0], want.u[want.prim >= 0])
+    assert np.all(got.seg == -1)
+    # shadow segments ending just short of, at and beyond the hits
+    length = np.where(want.prim >= 0, want.t * rng.choice([0.999, 1.001], n), 5.0)
+    length = length.astype(np.float32)
+    blocked = static.occluded(o, d, length)
+    assert 0 < blocked.sum() < n
+    np.testing.assert_array_equal(ms.occluded(o, d, length, np.zeros(n), {}), blocked)
+    if cull:
+        assert ms._keep < 0.5  # the test did leave rays out

@@ -59,6 +59,15 @@ class Accel:
             * (1.0 + 1e-6) + 1e-6 * self.extent + 1e-30
         self._scene = rtcore_scene.EmbreeScene(robust=robust)
         local = np.ascontiguousarray((tris - self.origin).astype(np.float32))
+        # the bounding box in local coordinates of the float32 triangles Embree stores,
+        # widened by 1e-6 of its size or distance from the origin (a ray that misses it
+        # cannot hit the BVH: :func:`.rest_frames.box_rays`)
+        f_lo = local.reshape(-1, 3).min(0).astype(np.float64)
+        f_hi = local.reshape(-1, 3).max(0).astype(np.float64)
+        pad = 1e-6 * float(max(np.max(f_hi - f_lo), np.max(np.abs(f_lo)),
+                               np.max(np.abs(f_hi)))) + 1e-30
+        self.box_lo = f_lo - pad
+        self.box_hi = f_hi + pad
         self._mesh = mesh_construction.TriangleMesh(self._scene, local)
         self.n_triangles = len(tris)
         self.warm_up()

@@ -219,6 +219,8 @@ class Paths(NamedTuple):
     prev_moving: np.ndarray  # int32 (N,): 1 when the last vertex was on a moving body
     cone: np.ndarray        # float32 (N, 2): the ray cone's width at the ray's origin and
     #                         its spread angle (texture level of detail, :mod:`.textures`)
+    pend: np.ndarray        # float64 (N,): the D_out by which the lanes are still to be
+    #                         shifted (1: none; :func:`pending_shift`)
 
 
 class Features(NamedTuple):
@@ -510,8 +512,21 @@ def frame_change(D, shift, beam):
     D = D_out = γ_u (1 + u·d′) (rest frame into the lab). Returns (the throughput factor:
     D⁵ when ``beam``, else 1; the lanes' shift: ln(D)·INV_DLOG columns when ``shift``,
     else 0); :func:`shade` applies them to the path's lanes and drops its cached
-    emission row."""
+    emission row (the shift of D_out later: :func:`pending_shift`)."""
     return (D * D * D * D * D if beam else 1.0), (math.log(D) * INV_DLOG if shift else 0.0)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def pending_shift(lamu, pend):
+    """A lane's lab table coordinate when its path left a moving body with D_out =
+    ``pend`` whose shift :func:`shade` has not applied yet: ``lamu`` + ln(D_out)·INV_DLOG.
+
+    The throughput takes D_out⁵ as the path leaves the body, the lanes' shift waits for
+    the next hit: on a moving body it is applied together with that hit's D_u, one
+    logarithm ln(D_out D_u) and one column split for both; anywhere else (a static hit,
+    a miss, an area light crossed, :func:`cross_area_lights`) alone, before any lookup.
+    ``Paths.pend`` is 1 when nothing is pending (always with ``doppler = false``)."""
+    return lamu + math.log(pend) * INV_DLOG
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -584,7 +599,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
      t_rgb, t_on, _, _) = s_tex
     f_pend, f_thr, f_alb, f_nrm = feats
     (keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu, prev_moving,
-     cone) = paths
+     cone, pend) = paths
     idx, o, d, rt = rays
     t_hit, prim, bu, bv, hseg = hits
     sh_idx, sh_o, sh_d, sh_t, sh_c, sh_t0 = shadows
@@ -603,6 +618,14 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         key = keys[pi]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         tri = prim[i]
+        sg = hseg[i]
+        moving = sg >= 0
+        if pend[pi] != 1.0 and not moving:  # the lanes into the lab (pending_shift)
+            cols = math.log(pend[pi]) * INV_DLOG
+            for j in range(nlanes):
+                lamu[pi, j] += cols
+                li[pi, j], lf[pi, j] = column(lamu[pi, j], top)
+            pend[pi] = 1.0
         # ---- a miss: the sky
         if tri < 0:
             if s_sky_row >= 0 and (depth > 0 or sky_seen):
@@ -634,8 +657,6 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
-        sg = hseg[i]
-        moving = sg >= 0
         sh = (0.0, 0.0, 0.0)
         sb = 0.0
         sig = 1.0
@@ -648,7 +669,11 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
             rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb, sig)
             dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
-            k5, cols = frame_change(d_u, s_shift, s_beam)
+            k5, _ = frame_change(d_u, False, s_beam)
+            # the lanes' shift into S_u with the one still pending from the last body:
+            # one logarithm for both (pending_shift)
+            _, cols = frame_change(d_u * pend[pi], s_shift, False)
+            pend[pi] = 1.0
             # (this loop and the one where the path leaves the body stay in shade: a
             # device function looping over the path arrays would cost reference counts)
             for j in range(nlanes):
@@ -903,11 +928,11 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         if moving:  # back into the lab: wi and D_out; the pdf per lab solid angle
             wlx, wly, wlz, d_out = aberrate_doppler_ray(wi[0], wi[1], wi[2], sh[0], sh[1],
                                                         sh[2], sb, sig)
-            k5, cols = frame_change(d_out, s_shift, s_beam)
+            k5, _ = frame_change(d_out, False, s_beam)
             for j in range(nlanes):
                 thr[pi, j] *= k5
-                lamu[pi, j] += cols
-                li[pi, j], lf[pi, j] = column(lamu[pi, j], top)
+            if s_shift:  # the lanes' shift waits for the next hit (pending_shift)
+                pend[pi] = d_out
             e_row[pi] = -1
             prev_pdf[pi] = pdf / (d_out * d_out)
             wi = (wlx, wly, wlz)
@@ -953,6 +978,8 @@ def cross_area_lights(sc, paths, rays, hits, n, depth, nlanes):
     s_tri_pmf, s_eps, s_area_tris = sc.tri_pmf, sc.eps, sc.area_tris
     L, thr, li, lf, prev_pdf, prev_delta = (paths.L, paths.thr, paths.li, paths.lf,
                                             paths.prev_pdf, paths.prev_delta)
+    lamu, pend = paths.lamu, paths.pend
+    top = s_emit.shape[1] - 1
     idx, o, d = rays.idx, rays.o, rays.d
     t_hit, prim = hits.t, hits.prim
     n_area = len(s_area_tris)
@@ -973,8 +1000,13 @@ def cross_area_lights(sc, paths, rays, hits, n, depth, nlanes):
                     w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
                         s_tri_pmf[lt], s_area[lt], t_l, cos_l))
                 er = s_mat_emit_row[s_tri_mat[lt]]
-                for j in range(nlanes):
-                    L[pi, j] += thr[pi, j] * w * lerp(s_emit, er, li[pi, j], lf[pi, j])
+                if pend[pi] != 1.0:  # the lab lanes of a ray that left a moving body
+                    for j in range(nlanes):
+                        L[pi, j] += thr[pi, j] * w * lerp_at(
+                            s_emit, er, pending_shift(lamu[pi, j], pend[pi]), top)
+                else:
+                    for j in range(nlanes):
+                        L[pi, j] += thr[pi, j] * w * lerp(s_emit, er, li[pi, j], lf[pi, j])
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -1040,7 +1072,8 @@ _TRACE_BUFFERS = (("L", 4, np.float32), ("thr", 4, np.float32), ("prev_pdf", 0, 
                   ("sh_c", 4, np.float32), ("li", 4, np.int32), ("lf", 4, np.float32),
                   ("e_row", 0, np.int32), ("e_val", 4, np.float32), ("lamu", 4, np.float32),
                   ("rt", 0, np.float64), ("sh_t0", 0, np.float64), ("seg", 0, np.int32),
-                  ("prev_moving", 0, np.int32), ("cone", 2, np.float32))
+                  ("prev_moving", 0, np.int32), ("cone", 2, np.float32),
+                  ("pend", 0, np.float64))
 
 
 _FEATURE_BUFFERS = (("pending", 0, np.int32), ("thr", 3, np.float32),
@@ -1143,8 +1176,9 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     b = wavefront_buffers(n, buffers)
     b["moving"] = (buffers if buffers is not None else {}).setdefault("moving", {})
     paths = Paths(keys, b["L"], b["thr"], b["li"], b["lf"], b["prev_pdf"], b["prev_delta"],
-                  b["e_row"], b["e_val"], b["lamu"], b["prev_moving"], b["cone"])
+                  b["e_row"], b["e_val"], b["lamu"], b["prev_moving"], b["cone"], b["pend"])
     paths.prev_moving[:] = 0
+    paths.pend[:] = 1.0
     if sc.tex.enabled:
         paths.cone[:, 0] = 0.0
         paths.cone[:, 1] = spread
@@ -1179,8 +1213,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
             hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
         if sc.tex.cutouts:  # through the holes of alpha-masked materials: no bounce
             hits = see_through(sc, accel, rays.o[:m], rays.d[:m], rays.t[:m], hits, None)
-        if depth == 0:
-            first_t, first_seg = hits.t, hits.seg.copy()
+        if depth == 0:  # (a MovingScene's hits live in its buffers until its next call)
+            first_t, first_seg = (hits.t.copy() if moving else hits.t), hits.seg.copy()
         if area_lights:
             cross_area_lights(sc, paths, rays, hits, m, depth, nlanes)
         m, ns = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes, sky_seen,
