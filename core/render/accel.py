@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 from embreex import mesh_construction, rtcore_scene
+from numba import njit
 
 MISS_DISTANCE = np.float32(1e30)
 _MISS_TFAR = float(MISS_DISTANCE)  # the initial tfar of intersect rays (exactly MISS_DISTANCE)
@@ -48,22 +49,22 @@ class Accel:
     """A committed Embree scene over ``triangles`` (float32 (T,3,3))."""
 
     def __init__(self, triangles: np.ndarray, robust: bool = False):
-        tris = np.asarray(triangles, dtype=np.float64)
+        tris = np.ascontiguousarray(triangles, dtype=np.float64)
         if tris.ndim != 3 or tris.shape[1:] != (3, 3) or len(tris) == 0:
             raise ValueError("Accel needs a non-empty (T, 3, 3) triangle array")
-        lo, hi = tris.reshape(-1, 3).min(0), tris.reshape(-1, 3).max(0)
+        pts = tris.reshape(-1, 3)
+        lo, hi = point_bounds(pts)
         self.origin = 0.5 * (lo + hi)
         self.extent = float(np.max(hi - lo))
         # the bounding sphere about ``origin`` (with room for the float32 rounding)
-        self.bound_radius = float(np.sqrt(((tris - self.origin) ** 2).sum(-1).max())) \
-            * (1.0 + 1e-6) + 1e-6 * self.extent + 1e-30
+        self.bound_radius = max_distance(pts, self.origin) * (1.0 + 1e-6) \
+            + 1e-6 * self.extent + 1e-30
         self._scene = rtcore_scene.EmbreeScene(robust=robust)
-        local = np.ascontiguousarray((tris - self.origin).astype(np.float32))
+        local = np.empty((len(tris), 3, 3), np.float32)
         # the bounding box in local coordinates of the float32 triangles Embree stores,
         # widened by 1e-6 of its size or distance from the origin (a ray that misses it
         # cannot hit the BVH: :func:`.rest_frames.box_rays`)
-        f_lo = local.reshape(-1, 3).min(0).astype(np.float64)
-        f_hi = local.reshape(-1, 3).max(0).astype(np.float64)
+        f_lo, f_hi = _to_local(pts, self.origin, local.reshape(-1, 3))
         pad = 1e-6 * float(max(np.max(f_hi - f_lo), np.max(np.abs(f_lo)),
                                np.max(np.abs(f_hi)))) + 1e-30
         self.box_lo = f_lo - pad
@@ -103,3 +104,39 @@ class Accel:
         r = self._scene.run(o_local, d, dists=np.ascontiguousarray(tmax, np.float32),
                             query="OCCLUDED")
         return r == 0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def point_bounds(pts):
+    """(min, max) per axis of the points (N, 3), float64."""
+    lo = pts[0].copy()
+    hi = pts[0].copy()
+    for i in range(1, pts.shape[0]):
+        for a in range(3):
+            lo[a] = min(lo[a], pts[i, a])
+            hi[a] = max(hi[a], pts[i, a])
+    return lo, hi
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def max_distance(pts, origin):
+    """max_i |pts[i] − origin| of the points (N, 3)."""
+    best = 0.0
+    for i in range(pts.shape[0]):
+        dx, dy, dz = pts[i, 0] - origin[0], pts[i, 1] - origin[1], pts[i, 2] - origin[2]
+        best = max(best, dx * dx + dy * dy + dz * dz)
+    return np.sqrt(best)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _to_local(pts, origin, out):
+    """``out`` = float32(pts − origin); returns the (min, max) of ``out`` per axis."""
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for i in range(pts.shape[0]):
+        for a in range(3):
+            v = np.float32(pts[i, a] - origin[a])
+            out[i, a] = v
+            lo[a] = min(lo[a], np.float64(v))
+            hi[a] = max(hi[a], np.float64(v))
+    return lo, hi

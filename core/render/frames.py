@@ -32,7 +32,7 @@ from ..scene.geometry import Scene, build_scene
 from ..scene.motion import resolve_camera
 from ..scene.spectral_model import resolved_job
 from . import environment
-from .accel import MISS_DISTANCE, Accel
+from .accel import MISS_DISTANCE, Accel, max_distance
 from .camera import PinholeCamera
 from .film import Film, clamp_samples
 from .integrator import (
@@ -87,8 +87,8 @@ class PreparedScene:
 
 
 def _bounding_radius(triangles: np.ndarray, origin: np.ndarray) -> float:
-    corners = np.asarray(triangles, np.float64).reshape(-1, 3) - origin
-    return float(np.sqrt((corners**2).sum(1).max())) * 1.001 + 1e-9
+    corners = np.ascontiguousarray(triangles, np.float64).reshape(-1, 3)
+    return max_distance(corners, np.asarray(origin, np.float64)) * 1.001 + 1e-9
 
 
 def prepare(scene: Scene, mode: str, env_nee: bool = True) -> PreparedScene:
