@@ -614,6 +614,27 @@ def mitsuba_split(med: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return rows
 
 
+def _when(sec: dict[str, Any]) -> str:
+    """"<date> on <cpu> (load <before> before, <after> after" of a section's meta."""
+    return (f"{sec.get('date', '?')} on {sec.get('cpu', '?')} (load "
+            f"{sec.get('load_before', [math.nan])[0]:.2f} before, "
+            f"{sec.get('load_after', [math.nan])[0]:.2f} after")
+
+
+#: The columns of a peer's status table: its version, whether it ran, and why not.
+_RAN_COLS = [("version", "version", ""),
+             ("ran", lambda r: "yes" if r["ran"] in (True, "True") else "**no**", ""),
+             ("why not", "reason", "")]
+
+
+def _converged_cols(peer: str, digits: int) -> list[tuple[str, Any, str]]:
+    """The columns of a converged-image comparison against ``peer``."""
+    return [(f"luminance ratio relray / {peer}", "luminance_ratio", ".4f"),
+            ("mean R, G, B ratio", lambda r: ", ".join(
+                f"{r[f'mean_ratio_{c}']:.{digits}f}" for c in "rgb"), ""),
+            ("mean ΔE00", "de00_mean", ".2f"), ("95th pct", "de00_p95", ".2f")]
+
+
 def _section_mitsuba(add, d, plots, md, meta) -> None:
     add("### Mitsuba 3 as a peer (`scalar_spectral`, `llvm_ad_spectral`)\n")
     st = d["mitsuba_status"]
@@ -622,16 +643,12 @@ def _section_mitsuba(add, d, plots, md, meta) -> None:
     if not st:
         add("Not run (`python -m relray.bench.run --only mitsuba`).\n")
         return
-    add(f"Run at {sec.get('date', '?')} on {sec.get('cpu', '?')} (load "
-        f"{sec.get('load_before', [math.nan])[0]:.2f} before, "
-        f"{sec.get('load_after', [math.nan])[0]:.2f} after). Mitsuba runs in its own venv "
+    add(f"Run at {_when(sec)}). Mitsuba runs in its own venv "
         "(`make mitsuba-venv`: `.cache/mitsuba-venv` from the hashed `bench/mitsuba.lock`; "
         "the LLVM variant with Debian's libLLVM 19 unpacked into `.cache/llvm19` and "
         "handed over by `DRJIT_LIBLLVM_PATH`), as a long-lived worker per variant "
         "(`bench/mitsuba_worker.py`), driven from `bench/mitsuba_peer.py`.\n")
-    add(table(st, [("variant", "variant", ""), ("version", "version", ""),
-                   ("ran", lambda r: "yes" if r["ran"] in (True, "True") else "**no**", ""),
-                   ("why not", "reason", "")]))
+    add(table(st, [("variant", "variant", ""), *_RAN_COLS]))
     add("")
     add("Matched settings (the scene dict is generated from relray's job; "
         "`tests/test_mitsuba_peer.py` checks it): the Cornell box of `presets/cornell.toml`, "
@@ -653,11 +670,7 @@ def _section_mitsuba(add, d, plots, md, meta) -> None:
             f"{cfg.get('ref_spp')} spp each, another seed than the ladder):\n")
         _img(add, plots, "mitsuba_converged", md, "relray and Mitsuba, converged")
         add(table(cc, [("Mitsuba variant", "variant", ""), ("light", "light", ""),
-                       ("luminance ratio relray / Mitsuba", "luminance_ratio", ".4f"),
-                       ("mean R, G, B ratio", lambda r:
-                        f"{r['mean_ratio_r']:.4f}, {r['mean_ratio_g']:.4f}, "
-                        f"{r['mean_ratio_b']:.4f}", ""),
-                       ("mean ΔE00", "de00_mean", ".2f"), ("95th pct", "de00_p95", ".2f")]))
+                       *_converged_cols("Mitsuba", 4)]))
         add("\n(the references' own noise is in these figures.)\n")
     tp = d["mitsuba_throughput"]
     eq = d["mitsuba_equal_error"]
@@ -766,9 +779,7 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
     if not st:
         add("Not run (`python -m relray.bench.run --only peer_scenes`).\n")
         return
-    add(f"Run at {sec.get('date', '?')} on {sec.get('cpu', '?')} (load "
-        f"{sec.get('load_before', [math.nan])[0]:.2f} before, "
-        f"{sec.get('load_after', [math.nan])[0]:.2f} after; "
+    add(f"Run at {_when(sec)}; "
         f"{sec.get('seconds', math.nan):.0f} s) by `python -m relray.bench.run --only "
         "peer_scenes` (`bench/peer_scenes.py`; `tests/test_peer_scenes.py` checks the "
         "export). Scenes, exported from relray's built scene (its triangles, the same "
@@ -818,9 +829,7 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
                            ("luminance ratio relray / peer", "luminance_ratio", ".3f"),
                            ("mean ΔE00", "de00_mean", ".2f")]))
         add("")
-    add(table(st, [("scene", "scene", ""), ("peer", "peer", ""), ("version", "version", ""),
-                   ("ran", lambda r: "yes" if r["ran"] in (True, "True") else "**no**", ""),
-                   ("why not", "reason", "")]))
+    add(table(st, [("scene", "scene", ""), ("peer", "peer", ""), *_RAN_COLS]))
     add("")
     cc = d["peer_converged"]
     if cc:
@@ -830,11 +839,7 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
         _img(add, plots, "peer_converged", md, "heavy and environment scenes, converged")
         _img(add, plots, "peer_converged_textured", md, "textured scene, converged")
         add(table(cc, [("scene", "scene", ""), ("peer", "variant", ""), ("light", "light", ""),
-                       ("luminance ratio relray / peer", "luminance_ratio", ".4f"),
-                       ("mean R, G, B ratio", lambda r:
-                        f"{r['mean_ratio_r']:.3f}, {r['mean_ratio_g']:.3f}, "
-                        f"{r['mean_ratio_b']:.3f}", ""),
-                       ("mean ΔE00", "de00_mean", ".2f"), ("95th pct", "de00_p95", ".2f")]))
+                       *_converged_cols("peer", 3)]))
         add("")
         add("Where they differ (see the ΔE00 maps): relray looks up the map **bilinearly "
             "for camera rays** (core/render/environment.py) and the peers with the nearest "
