@@ -825,7 +825,10 @@ def scene_hash(scene, mode: str) -> str:
             h.update(np.array([*seg.u, seg.t_ref, *seg.p_ref, seg.t_lo, seg.t_hi]).tobytes())
     if scene.environment is not None:  # the world's Environment Texture
         env = scene.environment
-        h.update(np.ascontiguousarray(env.pixels).tobytes())
+        if env.source:  # its file's path, size and time: no pass over a 2k map's pixels
+            h.update(env.source.encode())
+        else:
+            h.update(np.ascontiguousarray(env.pixels).tobytes())
         h.update(np.array([env.strength, env.rotation_z]).tobytes())
     if scene.stars is not None:  # the world's stars (World › Stars)
         for a in (scene.stars.directions, scene.stars.temperature, scene.stars.omega):

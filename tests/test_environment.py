@@ -582,7 +582,10 @@ def test_a_map_whose_tables_do_not_fit_is_refused(tmp_path, monkeypatch):
     write_map(tmp_path / "sky.exr", np.ones((4, 8, 3)))
     spec = parse_job(base_job(scene={"environment": {"file": "sky.exr"}}, materials=[GREY],
                               objects=[FAR_SPECK]), tmp_path / "job.toml").scene.environment
-    assert sky.load_environment(spec, tmp_path / "job.toml").pixels.shape == (4, 8, 3)
+    image = sky.load_environment(spec, tmp_path / "job.toml")
+    assert image.pixels.shape == (4, 8, 3)
+    st = (tmp_path / "sky.exr").stat()  # what identifies the file (the viewport's hash)
+    assert image.source == f"{tmp_path / 'sky.exr'}:{st.st_size}:{st.st_mtime_ns}"
     monkeypatch.setattr(sky.resources, "memory_limit",
                         lambda: resources.MemoryLimit(1000, "the test"))
     with pytest.raises(UserError, match="scene.environment.file.*8 x 4 environment map"):

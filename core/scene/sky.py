@@ -13,6 +13,7 @@ at infinity, sampling) is :mod:`..render.environment`'s.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,6 +43,9 @@ class EnvironmentImage:
     strength: float = 1.0
     rotation_z: float = 0.0
     wavelengths_nm: np.ndarray | None = None
+    #: the file it was read from, as "path:size:mtime_ns" ("" when made in memory): what
+    #: identifies its content cheaply (the viewport's scene hash)
+    source: str = ""
 
     @property
     def spectral(self) -> bool:
@@ -54,14 +58,16 @@ def load_environment(spec: EnvironmentSpec | None,
     if spec is None:
         return None
     spectral = read_spectral_image(spec.file, key=KEY, file=job_file)
+    st = os.stat(spec.file)  # readable: the reader above has checked it
+    source = f"{spec.file}:{st.st_size}:{st.st_mtime_ns}"
     if spectral is not None:
         h, w, bands = spectral.pixels.shape
         check_table_memory(h, w, job_file, 4 * bands)
         return EnvironmentImage(spectral.pixels, spec.strength, spec.rotation_z,
-                                spectral.wavelengths_nm)
+                                spectral.wavelengths_nm, source)
     image = read_image(spec.file, key=KEY, file=job_file, encoding="auto")
     check_table_memory(image.pixels.shape[0], image.pixels.shape[1], job_file)
-    return EnvironmentImage(image.pixels, spec.strength, spec.rotation_z)
+    return EnvironmentImage(image.pixels, spec.strength, spec.rotation_z, source=source)
 
 
 def check_table_memory(height: int, width: int, job_file: Path | str | None,

@@ -173,3 +173,26 @@ def test_a_procedural_sky_is_baked_and_rendered_as_cycles_shows_it(engine, tmp_p
     np.testing.assert_allclose(rows_ours, rows_cycles, rtol=0.08)
     # (not a flat image: sky above, the darker ground below the horizon)
     assert rows_cycles.max() > 2.0 * rows_cycles.min()
+
+
+def test_the_viewport_scene_hash_follows_the_map_file_not_its_pixels(engine):
+    """engine.scene_hash identifies a map read from a file by its path, size and time
+    (no pass over its pixels on every update) and a map made in memory by its pixels:
+    either way a different map is a different hash, the same map the same."""
+    from types import SimpleNamespace
+    sky = ext_module("core.scene.sky")
+
+    def scene(env):
+        return SimpleNamespace(triangles=np.zeros((1, 3, 3)), normals=None,
+                               material_ids=np.zeros(1, np.int32), background=np.zeros(3),
+                               tri_group=None, uvs=None, groups=(), environment=env,
+                               stars=None, materials=[], light_triangles=0, lights=[])
+
+    px = np.ones((2, 4, 3), np.float32)
+    a = engine.scene_hash(scene(sky.EnvironmentImage(px, source="/m.exr:10:1")), "cie1931")
+    same = engine.scene_hash(scene(sky.EnvironmentImage(px * 2, source="/m.exr:10:1")),
+                             "cie1931")
+    saved = engine.scene_hash(scene(sky.EnvironmentImage(px, source="/m.exr:10:2")),
+                              "cie1931")
+    mem = [engine.scene_hash(scene(sky.EnvironmentImage(p)), "cie1931") for p in (px, px * 2)]
+    assert a == same and a != saved and mem[0] != mem[1]
