@@ -83,6 +83,8 @@ from ..core.scene.sky import load_environment
 from ..core.scene.stars import star_field
 from ..core.scene.worldlines import rest_frame_offsets
 from . import sky_bake
+from .nodes import linked_node as _linked_node
+from .nodes import node_tree, world_surface
 
 #: Object types that ``to_mesh`` turns into triangles.
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
@@ -91,18 +93,6 @@ MISSING_TEXTURE = np.array([1.0, 0.0, 1.0])
 #: Blender's default surface (no material): as the core's glTF default.
 DEFAULT_MATERIAL = core_job.material_from_dict(
     {"name": "relray_default", "base_color": (0.8, 0.8, 0.8), "roughness": 0.5})
-
-
-def node_tree(id_data):
-    """The node tree of a material or world, or None when it does not use nodes.
-
-    (``use_nodes`` is deprecated from Blender 5.0 on, where node trees are always used.)
-    """
-    import bpy
-
-    if bpy.app.version < (5, 0, 0) and not getattr(id_data, "use_nodes", False):
-        return None
-    return id_data.node_tree
 
 
 class ExportError(ValueError):
@@ -199,22 +189,6 @@ def matrix_np(matrix) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- materials
-
-
-def _linked_node(socket):
-    """The node feeding an input socket (through reroutes), or None."""
-    seen = 0
-    while socket.is_linked and seen < 64:
-        link = socket.links[0]
-        if not link.is_valid or link.is_muted:
-            return None
-        node = link.from_node
-        if node.type == "REROUTE":
-            socket = node.inputs[0]
-            seen += 1
-            continue
-        return node
-    return None
 
 
 def image_mean_color(image) -> np.ndarray | None:
@@ -627,11 +601,9 @@ def world_background(world, warnings: Warnings) -> np.ndarray:
     """The constant sky radiance (RGB) of the world."""
     if world is None:
         return np.zeros(3)
-    tree = node_tree(world)
-    if tree is None:
+    if node_tree(world) is None:
         return np.maximum(np.asarray(world.color[:3], np.float64), 0.0)
-    out = tree.get_output_node("CYCLES") or tree.get_output_node("ALL")
-    node = _linked_node(out.inputs["Surface"]) if out is not None else None
+    node = world_surface(world)
     if node is None:
         return np.zeros(3)
     if node.type != "BACKGROUND":
@@ -651,9 +623,7 @@ def world_environment(world, folder: Path | None, warnings: Warnings
     written into ``folder`` (a temporary one when None). Blender's Mapping node turns
     the lookup vector by θ, which turns the map by -θ: ``rotation_z = -θ``
     (job-format.md, "Skies")."""
-    tree = node_tree(world) if world is not None else None
-    out = (tree.get_output_node("CYCLES") or tree.get_output_node("ALL")) if tree else None
-    bg = _linked_node(out.inputs["Surface"]) if out is not None else None
+    bg = world_surface(world)
     if bg is None or bg.type != "BACKGROUND":
         return None
     tex = _linked_node(bg.inputs["Color"])

@@ -27,22 +27,10 @@ from pathlib import Path
 import bpy
 
 from ..core import user_cache_dir
+from .nodes import background_source
 
 BAKE_SIZE = (1024, 512)
 BAKE_SAMPLES = 32
-
-
-def background_source(world):
-    """The node feeding the world's Background colour, or None (a constant colour)."""
-    tree = getattr(world, "node_tree", None) if world is not None else None
-    if tree is None:
-        return None
-    out = tree.get_output_node("CYCLES") or tree.get_output_node("ALL")
-    link = out.inputs["Surface"].links if out is not None else ()
-    bg = link[0].from_node if link else None
-    if bg is None or bg.type != "BACKGROUND" or not bg.inputs["Color"].links:
-        return None
-    return bg.inputs["Color"].links[0].from_node
 
 
 def is_procedural(world) -> bool:

@@ -224,7 +224,8 @@ class RELRAY_PT_world_sky(RelrayPanel, bpy.types.Panel):  # noqa: N801 - Blender
         return context.world is not None and super().poll(context)
 
     def draw(self, context):
-        from .sky_bake import background_source, baked_path
+        from .nodes import background_source
+        from .sky_bake import baked_path
 
         layout = self.layout
         world = context.world
