@@ -48,8 +48,11 @@ def export_job(directory: Path) -> Path:
     return farm.export_farm(bpy.context, directory).job_path
 
 
-def drive(run, timeout: float = 120.0, step: float = 0.02, on_event=None):
-    """The modal timer's loop: poll until the run has finished; states seen, in order."""
+def drive(run, timeout: float = 900.0, step: float = 0.02, on_event=None):
+    """The modal timer's loop: poll until the run has finished; states seen, in order.
+
+    ``timeout`` only guards against a hang: the child ``relray render`` of a fresh
+    machine compiles the render kernels first, about two minutes on 2 busy cores."""
     states = [run.progress.state]
     t0 = time.monotonic()
     while not run.poll().finished:
