@@ -183,10 +183,9 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
             rows.append(m)
         cm.write_csv(out / "throughput.csv", rows)
         cm.write_csv(out / "profile.csv", throughput.profile_table(rows[0]))
-        floor = embree_floor.measure(cornell.prep("cie1931").accel, cornell.scene.triangles,
-                                     rays=plan.floor_rays)
-        if floor is not None:
-            cm.write_csv(out / "embree_floor.csv", [floor])
+        cm.write_csv(out / "embree_floor.csv", [
+            embree_floor.measure(cornell.prep("cie1931").accel, cornell.scene.triangles,
+                                 rays=plan.floor_rays)])
         size = min(plan.tp_size, 128)
         cm.write_csv(out / "shade_breakdown.csv",
                      throughput.shade_breakdown(cornell, size, size,

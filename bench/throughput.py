@@ -67,22 +67,15 @@ HERO_STAGES = ("wavelength offsets", "hero inverse CDF", "λ to grid coordinates
 FILM_STAGES = ("sensor_values", "film add_samples")
 
 
-class _RunProxy:
-    """Stands in for an Accel's EmbreeScene: times ``run`` (Embree proper) and counts rays."""
-
-    def __init__(self, scene, meter: StageMeter):
-        self._scene = scene
-        self._meter = meter
-
-    def run(self, o, d, *a, **kw):
-        t = time.thread_time()
-        r = self._scene.run(o, d, *a, **kw)
-        kind = "occluded" if kw.get("query") == "OCCLUDED" else "intersect"
-        self._meter.add(f"embree run {kind}", time.thread_time() - t, len(o))
-        return r
-
-    def __getattr__(self, name):
-        return getattr(self._scene, name)
+#: The compiled Embree loops (:mod:`relray.core.render.embree`) as :mod:`accel` calls them:
+#: (attribute of accel, stage); their time is Embree proper plus the ray set-up per ray.
+#: The moving scene's loops (:mod:`relray.core.render.rest_frames`) trace the static BVH and
+#: every velocity group's rest-frame rays in one pass: their rays are counted as lab rays
+#: under their own stages (rest-frame arithmetic and Embree together).
+EMBREE_LOOPS = ((accel_mod, "intersect_rays", "embree run intersect", 1),
+                (accel_mod, "occluded_rays", "embree run occluded", 1),
+                (rest_frames_mod, "moving_hits", "moving run intersect", 4),
+                (rest_frames_mod, "moving_blocked", "moving run occluded", 4))
 
 
 class StageMeter:
@@ -92,18 +85,16 @@ class StageMeter:
     busy machine that preempts the render does not inflate the stages; the stages of all
     threads add up to (at most) the process's CPU time.
 
-    ``with StageMeter(prep.accel) as m: renderer.render(...)``; then ``m.seconds[stage]``.
-    "embree run intersect"/"embree run occluded" are the time inside Embree's ``run``
-    alone (``m.rays`` counts their rays, ``m.rays_by`` per kind);
-    "embree intersect"/"embree occluded" include the numpy around it in :mod:`accel`.
+    ``with StageMeter() as m: renderer.render(...)``; then ``m.seconds[stage]``.
+    "embree run intersect"/"embree run occluded" are the time inside the compiled loops
+    that call Embree (:data:`EMBREE_LOOPS`; ``m.rays`` counts their rays, ``m.rays_by``
+    per kind); "embree intersect"/"embree occluded" include the numpy around them in
+    :mod:`accel`.
     Module-level functions are patched where the caller looks them up (``render.trace``,
     ``integrator.shade``), so the wrappers see every call.
     """
 
-    def __init__(self, accel: accel_mod.Accel | Sequence[accel_mod.Accel] | None = None,
-                 stages: dict[str, list[tuple[Any, str]]] | None = None):
-        self.accels = [] if accel is None else (
-            [accel] if isinstance(accel, accel_mod.Accel) else list(accel))
+    def __init__(self, stages: dict[str, list[tuple[Any, str]]] | None = None):
         self.stages = STAGES if stages is None else stages
         self.seconds: dict[str, float] = {}
         self.calls: dict[str, int] = {}
@@ -123,7 +114,7 @@ class StageMeter:
             if rays:
                 self.rays_by[stage] = self.rays_by.get(stage, 0) + rays
 
-    def _wrap(self, owner: Any, name: str, stage: str) -> None:
+    def _wrap(self, owner: Any, name: str, stage: str, rays_arg: int | None = None) -> None:
         orig = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name, None)
         if orig is None or any(o is owner and n == name for o, n in self._wrapped):
             if orig is None:
@@ -137,7 +128,8 @@ class StageMeter:
             try:
                 return orig(*a, **kw)
             finally:
-                meter.add(stage, time.thread_time() - t)
+                meter.add(stage, time.thread_time() - t,
+                          0 if rays_arg is None else len(a[rays_arg]))
 
         setattr(owner, name, timed)
         self._undo.append(lambda: setattr(owner, name, orig))
@@ -146,10 +138,8 @@ class StageMeter:
         for stage, targets in self.stages.items():
             for owner, name in targets:
                 self._wrap(owner, name, stage)
-        for acc in self.accels:
-            scene = acc._scene
-            acc._scene = _RunProxy(scene, self)
-            self._undo.append(lambda acc=acc, scene=scene: setattr(acc, "_scene", scene))
+        for owner, name, stage, rays_arg in EMBREE_LOOPS:
+            self._wrap(owner, name, stage, rays_arg)
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -157,15 +147,6 @@ class StageMeter:
             undo()
         self._undo.clear()
         self._wrapped.clear()
-
-
-def tracer_accels(prep: render.PreparedScene) -> list[accel_mod.Accel]:
-    """Every Embree scene a render traces: the static BVH and each velocity group's."""
-    out = [] if prep.accel is None else [prep.accel]
-    tracer = prep.tracer
-    if isinstance(tracer, rest_frames_mod.MovingScene):
-        out += [g.accel for g in tracer.groups if g.accel is not None]
-    return out
 
 
 def measure_bench(bench: cm.RelrayBench, threads: int, repeat: int = 3,
@@ -177,20 +158,21 @@ def measure_bench(bench: cm.RelrayBench, threads: int, repeat: int = 3,
     ``profile`` the stage seconds (median over repeats) are returned as ``stage:<name>``.
     """
     fr = bench.renderer(threads=threads, **overrides)
-    prep = bench.prep(fr.settings.spectral)
     ev = bench.event(beta)
     fr.render(ev, 1)  # warm-up: numba compile / cache load
     rows = []
     for _ in range(repeat):
         load = cm.load_average()[0]
-        with StageMeter(tracer_accels(prep), STAGES if profile else {}) as m:
+        with StageMeter(STAGES if profile else {}) as m:
             with cm.timed() as t:
                 film, stats = fr.render(ev, 1)
         embree = m.seconds.get("embree run intersect", 0.0) + m.seconds.get(
             "embree run occluded", 0.0)
         row = {"wall_s": t.wall, "cpu_s": t.cpu, "paths": stats.paths, "rays": m.rays,
-               "intersect_rays": m.rays_by.get("embree run intersect", 0),
-               "occluded_rays": m.rays_by.get("embree run occluded", 0),
+               "intersect_rays": m.rays_by.get("embree run intersect", 0)
+               + m.rays_by.get("moving run intersect", 0),
+               "occluded_rays": m.rays_by.get("embree run occluded", 0)
+               + m.rays_by.get("moving run occluded", 0),
                "embree_s": embree, "load1": load,
                "hit_fraction": float(film.sum_alpha.sum() / max(film.count.sum(), 1))}
         if profile:
@@ -222,7 +204,9 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
     """Exclusive stage rows (CPU seconds, share of the CPU time) of a profiled measurement.
 
     Nested timers are subtracted: "Embree wrappers" is intersect + occluded - run (the
-    numpy in accel.py); "velocity groups" is MovingScene's queries - the Embree calls in
+    numpy in accel.py); "velocity groups" is MovingScene's queries (its compiled loops
+    trace the static BVH and every group's rest-frame rays together, Embree included) -
+    the Embree calls in
     them (the rest-frame rays and the merge of the groups' hits); "trace: other" is
     trace - Embree calls - velocity groups - shade - add_shadows
     (buffers); "chunk: other" is chunk - trace - camera - hero - film (the inline numpy
@@ -249,7 +233,7 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
         ("shade kernel", g("shade")),
         ("add_shadows kernel", g("add_shadows")),
         ("area-light kernel (scenes with area lights)", g("area lights")),
-        ("velocity groups: rest-frame rays, merge", moving),
+        ("velocity groups: rest-frame rays with their Embree traversals", moving),
         ("trace: other (buffers)", g("trace") - calls - moving
          - g("shade", "add_shadows", "area lights")),
         *((f"camera: {n}", g(n)) for n in CAMERA_STAGES),
@@ -462,7 +446,6 @@ def beta_sweep(bench: cm.RelrayBench | None, speeds: Sequence[float], spp: int, 
     """
     directions = BETA_DIRECTIONS if directions is None else directions
     bench = bench if bench is not None else cm.RelrayBench(closed_box_job())
-    prep = bench.prep(bench.job.render.spectral)
     rows = []
     for dname, unit in directions.items():
         u = np.asarray(unit, np.float64) / np.linalg.norm(unit)
@@ -474,7 +457,7 @@ def beta_sweep(bench: cm.RelrayBench | None, speeds: Sequence[float], spp: int, 
         for _ in range(repeat):
             for b in speeds:
                 cam = {"camera": [t for n in CAMERA_STAGES for t in STAGES[n]]}
-                with StageMeter(prep.accel, cam) as m:
+                with StageMeter(cam) as m:
                     r = bench.render(beta=b * u, renderer=fr)
                 imgs[b] = r.rgb
                 hit = float(r.film.sum_alpha.sum() / max(r.film.count.sum(), 1))

@@ -1,17 +1,14 @@
-"""Ray-scene intersection on Embree (embreex).
+"""Ray-scene intersection on Embree.
 
 One :class:`Accel` per static triangle set (one velocity group), built once and
 reused for every frame of an animation.  All vectors here are in the frame in which
 the triangles are at rest (the lab frame for static scenes).
 
-Embree facts this module relies on (measured with embreex 4.4, see architecture.md):
-
-- ``run`` loops over single rays without the GIL, so Python threads trace in parallel;
-- the BVH is built lazily *with* the GIL held: :meth:`Accel.warm_up` builds it before
-  any worker thread starts;
-- ``tnear`` is 0, so callers offset ray origins themselves;
-- ``query="OCCLUDED"`` returns 0 for a blocked ray and -1 for a free one, and
-  ``dists`` bounds the segment.
+The BVH is Embree's, built through its C API (:mod:`.embree`, the libembree4 of the
+embreex wheel) when the Accel is made; the queries run in compiled loops that call
+``rtcIntersect1``/``rtcOccluded1`` one ray at a time without the GIL, so worker threads
+trace in parallel, and kernels can trace from the :attr:`Accel.handle` themselves.
+``tnear`` is 0, so callers offset ray origins themselves.
 
 Geometry is stored in float32 *relative to* ``origin`` (the scene's bounding-box
 centre), so rays far from the world origin keep their precision near the geometry.
@@ -22,11 +19,12 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from embreex import mesh_construction, rtcore_scene
 from numba import njit
 
+from .embree import TriangleScene, intersect_rays, occluded_rays
+
 MISS_DISTANCE = np.float32(1e30)
-_MISS_TFAR = float(MISS_DISTANCE)  # the initial tfar of intersect rays (exactly MISS_DISTANCE)
+_MISS_LENGTH = np.full(1, MISS_DISTANCE)  # one length for all: unbounded rays
 
 
 class Hits(NamedTuple):
@@ -59,25 +57,22 @@ class Accel:
         # the bounding sphere about ``origin`` (with room for the float32 rounding)
         self.bound_radius = max_distance(pts, self.origin) * (1.0 + 1e-6) \
             + 1e-6 * self.extent + 1e-30
-        self._scene = rtcore_scene.EmbreeScene(robust=robust)
         local = np.empty((len(tris), 3, 3), np.float32)
         # the bounding box in local coordinates of the float32 triangles Embree stores,
         # widened by 1e-6 of its size or distance from the origin (a ray that misses it
-        # cannot hit the BVH: :func:`.rest_frames.box_rays`)
+        # cannot hit the BVH: :func:`.rest_frames.meets_box`)
         f_lo, f_hi = _to_local(pts, self.origin, local.reshape(-1, 3))
         pad = 1e-6 * float(max(np.max(f_hi - f_lo), np.max(np.abs(f_lo)),
                                np.max(np.abs(f_hi)))) + 1e-30
         self.box_lo = f_lo - pad
         self.box_hi = f_hi + pad
-        self._mesh = mesh_construction.TriangleMesh(self._scene, local)
+        self._scene = TriangleScene(local, robust=robust)
         self.n_triangles = len(tris)
-        self.warm_up()
 
-    def warm_up(self) -> None:
-        """Build the BVH now, with the GIL held, before threads use the scene."""
-        o = np.zeros((1, 3), np.float32)
-        d = np.array([[0.0, 0.0, 1.0]], np.float32)
-        self._scene.run(o, d, query="OCCLUDED")
+    @property
+    def handle(self) -> np.uint64:
+        """The ``RTCScene`` for kernels that trace themselves (:mod:`.embree`)."""
+        return self._scene.handle
 
     def local(self, points: np.ndarray) -> np.ndarray:
         """Lab points -> the float32 coordinates the BVH stores (translated by -origin)."""
@@ -91,19 +86,25 @@ class Accel:
         if len(o_local) == 0:
             e = np.empty(0, np.float32)
             return Hits(e, np.empty(0, np.int32), e, e)
-        # tfar starts at MISS_DISTANCE (embreex fills its float32 tfar array with a scalar
-        # ``dists``) and Embree leaves it there on a miss, so t needs no pass of its own
-        dists = _MISS_TFAR if tmax is None else np.ascontiguousarray(tmax, np.float32)
-        r = self._scene.run(o_local, d, dists=dists, output=1)
-        return Hits(r["tfar"], r["primID"], r["u"], r["v"])
+        n = len(o_local)
+        lengths = _MISS_LENGTH if tmax is None else np.ascontiguousarray(tmax, np.float32)
+        t, prim = np.empty(n, np.float32), np.empty(n, np.int32)
+        u, v = np.empty(n, np.float32), np.empty(n, np.float32)
+        intersect_rays(self.handle, as_rays(o_local), as_rays(d), lengths, t, prim, u, v)
+        return Hits(t, prim, u, v)
 
     def occluded(self, o_local: np.ndarray, d: np.ndarray, tmax: np.ndarray) -> np.ndarray:
         """True where the segment ``o_local + t d``, 0 < t < tmax, is blocked."""
-        if len(o_local) == 0:
-            return np.empty(0, bool)
-        r = self._scene.run(o_local, d, dists=np.ascontiguousarray(tmax, np.float32),
-                            query="OCCLUDED")
-        return r == 0
+        out = np.empty(len(o_local), bool)
+        if len(o_local):
+            occluded_rays(self.handle, as_rays(o_local), as_rays(d),
+                          np.ascontiguousarray(tmax, np.float32), out)
+        return out
+
+
+def as_rays(a: np.ndarray) -> np.ndarray:
+    """float32 C-contiguous (N, 3) (the kernels' one type signature)."""
+    return np.ascontiguousarray(a, np.float32)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
