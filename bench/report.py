@@ -1433,8 +1433,13 @@ def _section_profile(add, d, plots, md, meta) -> None:
                        ("full", "full_ns", ".0f"), ("without NEE", "no_nee_ns", ".0f"),
                        ("emission only", "emission_only_ns", ".0f"),
                        ("1 lane instead of 4", "one_lane_ns", ".0f"),
+                       ("shadow rays left to trace", "shadows_later_ns", ".0f"),
                        ("fastmath recompile", "fastmath_ns", ".0f")]))
-        add("")
+        add("\nThe kernel traces its shadow rays itself (`rest_frames.blocked1` calls "
+            "Embree's `rtcOccluded1`), so *full* includes their Embree queries; *shadow "
+            "rays left to trace* is the kernel as it runs with alpha-masked materials "
+            "(the rays written to a buffer and traced after it): the difference is what "
+            "the shadow rays cost inside it.\n")
     _section_profile_scenes(add, d)
 
 

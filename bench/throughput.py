@@ -78,6 +78,9 @@ EMBREE_LOOPS = ((accel_mod, "intersect_rays", "embree run intersect", 1),
                 (rest_frames_mod, "moving_blocked", "moving run occluded", 4))
 
 
+_FAILED = object()  # a timed call that raised: no rays counted
+
+
 class StageMeter:
     """CPU seconds and calls per render stage, by wrapping the core's functions (thread-safe).
 
@@ -114,7 +117,8 @@ class StageMeter:
             if rays:
                 self.rays_by[stage] = self.rays_by.get(stage, 0) + rays
 
-    def _wrap(self, owner: Any, name: str, stage: str, rays_arg: int | None = None) -> None:
+    def _wrap(self, owner: Any, name: str, stage: str,
+              rays: Callable[[tuple, Any], int] | None = None) -> None:
         orig = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name, None)
         if orig is None or any(o is owner and n == name for o, n in self._wrapped):
             if orig is None:
@@ -125,21 +129,25 @@ class StageMeter:
 
         def timed(*a, **kw):
             t = time.thread_time()
+            out = _FAILED
             try:
-                return orig(*a, **kw)
+                out = orig(*a, **kw)
+                return out
             finally:
                 meter.add(stage, time.thread_time() - t,
-                          0 if rays_arg is None else len(a[rays_arg]))
+                          0 if rays is None or out is _FAILED else rays(a, out))
 
         setattr(owner, name, timed)
         self._undo.append(lambda: setattr(owner, name, orig))
 
     def __enter__(self) -> StageMeter:
+        # shade traces its shadow rays itself: the third value it returns counts them
+        self._wrap(integrator_mod, "shade", "shade", lambda a, out: out[2])
         for stage, targets in self.stages.items():
             for owner, name in targets:
                 self._wrap(owner, name, stage)
-        for owner, name, stage, rays_arg in EMBREE_LOOPS:
-            self._wrap(owner, name, stage, rays_arg)
+        for owner, name, stage, arg in EMBREE_LOOPS:
+            self._wrap(owner, name, stage, lambda a, _, arg=arg: len(a[arg]))
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -172,7 +180,7 @@ def measure_bench(bench: cm.RelrayBench, threads: int, repeat: int = 3,
                "intersect_rays": m.rays_by.get("embree run intersect", 0)
                + m.rays_by.get("moving run intersect", 0),
                "occluded_rays": m.rays_by.get("embree run occluded", 0)
-               + m.rays_by.get("moving run occluded", 0),
+               + m.rays_by.get("moving run occluded", 0) + m.rays_by.get("shade", 0),
                "embree_s": embree, "load1": load,
                "hit_fraction": float(film.sum_alpha.sum() / max(film.count.sum(), 1))}
         if profile:
@@ -254,7 +262,9 @@ def shade_breakdown(bench: cm.RelrayBench, width: int = 128, height: int = 128,
     One render (1 spp, 1 thread) records the kernel's arguments for every wavefront; the
     first wavefront of each bounce in ``depths`` is then re-run (best of ``reps``, thread
     CPU clock) as it is, without NEE (an empty light table), with emission only (at the
-    last bounce), with 1 lane instead of 4, and (``fastmath``) recompiled with
+    last bounce), with 1 lane instead of 4, with its shadow rays left in the buffer
+    instead of traced (``trace_shadows`` off: the difference is their Embree queries
+    and the rest-frame work for them), and (``fastmath``) recompiled with
     ``fastmath=True`` (a compile of several seconds).
     Returns ns per shaded ray for each variant.
     """
@@ -307,9 +317,12 @@ def shade_breakdown(bench: cm.RelrayBench, width: int = 128, height: int = 128,
         last[arg["max_depth"]] = depth + 1
         one = list(args)
         one[arg["nlanes"]] = 1
+        later = list(args)   # the shadow rays left in the buffer, as with alpha masks
+        later[arg["trace_shadows"]] = False
         rows.append({"depth": depth, "rays": args[arg["n"]], "full_ns": best(orig, args),
                      "no_nee_ns": best(orig, no_nee), "emission_only_ns": best(orig, last),
                      "one_lane_ns": best(orig, one),
+                     "shadows_later_ns": best(orig, later),
                      "fastmath_ns": best(fast, args) if fast is not None else math.nan})
     return rows
 

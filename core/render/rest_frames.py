@@ -174,28 +174,46 @@ def moving_hits(static, box_lo, box_hi, st, o, d, t, best, prim, bu, bv, seg_hit
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
+def blocked1(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tmax,
+             t):  # pragma: no cover - compiled
+    """Whether the lab segment from event (t, o) along d (float32 o, d, ``tmax``), 0 < s <
+    tmax, is blocked by the static BVH ``static`` (0: none; only if it meets the box) or
+    by a segment's group of ``st`` at the time the ray passes it (:func:`rest_ray`, the
+    whole length: any blocker will do); ``f``, ``w``, ``addr``: an RTCRayHit buffer
+    (:func:`.embree.rayhit_buffer`). Compiled on its own (not inlined), so a caller's
+    fast-math flags never reach the rest-frame arithmetic."""
+    x, y, z = np.float64(ox), np.float64(oy), np.float64(oz)
+    u, v, q = np.float64(dx), np.float64(dy), np.float64(dz)
+    if static != 0 and meets_box(x, y, z, u, v, q, np.float64(tmax), box_lo, box_hi):
+        if occluded1(static, f, w, addr, ox, oy, oz, dx, dy, dz, tmax):
+            return True
+    for s in range(st.handle.shape[0]):
+        ok, sx, sy, sz, ux, uy, uz, _, _, length = rest_ray(x, y, z, u, v, q, t, tmax, st, s)
+        if ok and occluded1(st.handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
+                            np.float32(length)):
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def moving_blocked(static, box_lo, box_hi, st, o, d, tmax, t, blocked):
-    """Whether each lab segment from event (``t``, ``o``) along ``d``, 0 < s < ``tmax``, is
-    blocked by the static BVH (rays that meet its box) or by a segment's group at the
-    time the ray passes it (:func:`rest_ray`, the whole length: any blocker will do)."""
+    """:func:`blocked1` of each lab segment (origins ``o``, directions ``d``, lengths
+    ``tmax``, origin lab times ``t``) into ``blocked``."""
     f, w, addr = rayhit_buffer()
     for i in range(o.shape[0]):
-        ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
-        dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
-        hit = False
-        if static != 0 and meets_box(ox, oy, oz, dx, dy, dz, np.float64(tmax[i]), box_lo,
-                                     box_hi):
-            hit = occluded1(static, f, w, addr, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1],
-                            d[i, 2], tmax[i])
-        for s in range(st.handle.shape[0]):
-            if hit:
-                break
-            ok, sx, sy, sz, ux, uy, uz, _, _, length = rest_ray(ox, oy, oz, dx, dy, dz, t[i],
-                                                                tmax[i], st, s)
-            if ok:
-                hit = occluded1(st.handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
-                                np.float32(length))
-        blocked[i] = hit
+        blocked[i] = blocked1(static, box_lo, box_hi, st, f, w, addr, o[i, 0], o[i, 1],
+                              o[i, 2], d[i, 0], d[i, 1], d[i, 2], tmax[i], t[i])
+
+
+def query_args(tracer: Accel | MovingScene | None) -> tuple:
+    """(static scene handle, its box lo, hi, :class:`SegmentTable`) of a tracer, for
+    kernels that trace by themselves (:func:`blocked1`); a static Accel has no segment,
+    None (nothing to hit) neither a handle."""
+    if isinstance(tracer, MovingScene):
+        return tracer.query_args()
+    if tracer is None:
+        return np.uint64(0), np.zeros(3), np.zeros(3), _segments([], np.zeros(3))
+    return tracer.handle, tracer.box_lo, tracer.box_hi, _segments([], tracer.origin)
 
 
 class MovingScene:
@@ -209,6 +227,11 @@ class MovingScene:
         self._handle = np.uint64(0) if static is None else static.handle
         self._box = (np.zeros(3), np.zeros(3)) if static is None else (static.box_lo,
                                                                        static.box_hi)
+
+    def query_args(self) -> tuple:
+        """(static scene handle (0: none), its box lo, hi, the segments): see
+        :func:`query_args`."""
+        return self._handle, *self._box, self.segments
 
     @staticmethod
     def _buffers(buf: dict, n: int) -> dict:
@@ -231,7 +254,7 @@ class MovingScene:
         buf = self._buffers({} if buffers is None else buffers, n)
         out = Hits(buf["best"][:n], buf["prim"][:n], buf["u"][:n], buf["v"][:n],
                    buf["seg"][:n])
-        moving_hits(self._handle, *self._box, self.segments, as_rays(o), as_rays(d),
+        moving_hits(*self.query_args(), as_rays(o), as_rays(d),
                     np.ascontiguousarray(t, np.float64), out.t, out.prim, out.u, out.v,
                     out.seg)
         return out
@@ -243,7 +266,7 @@ class MovingScene:
         (:func:`moving_blocked`)."""
         n = len(o)
         blocked = self._buffers({} if buffers is None else buffers, n)["blocked"][:n]
-        moving_blocked(self._handle, *self._box, self.segments, as_rays(o), as_rays(d),
+        moving_blocked(*self.query_args(), as_rays(o), as_rays(d),
                        np.ascontiguousarray(tmax, np.float32),
                        np.ascontiguousarray(t, np.float64), blocked)
         return blocked
