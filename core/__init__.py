@@ -1,4 +1,5 @@
-"""The standalone render core: numpy, embreex and numba, never bpy.
+"""The standalone render core: numpy, Embree (the embreex wheel's libembree4, through its C
+API) and numba, never bpy.
 
 Packages follow the data flow, and each imports only those before it (the layering that
 ``tests/test_layout.py`` enforces, with no import cycle anywhere)::
@@ -8,7 +9,8 @@ Packages follow the data flow, and each imports only those before it (the layeri
     resources                  memory limit (physical, cgroup, rlimit), thread cap
     physics/    relativity, spectrum, sigmoid, cie_tables
     scene/      description ◄── job (TOML), gltf, shapes;  geometry, motion, footprint, names
-    render/     camera, accel, sampling, bsdf, lights, materials, integrator, film, frames
+    render/     camera, embree, accel, rest_frames, sampling, bsdf, lights, materials,
+                integrator, film, frames
     output/     imageio, digest, frame_files (names, metadata, resume), contact
     progress    tqdm bar, JSON lines (the subprocess contract)
     runner      a job's frames in this process
