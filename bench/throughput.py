@@ -238,7 +238,7 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
         ("Embree intersect (run)", run_i),
         ("Embree occluded (run)", run_o),
         ("Embree wrappers (numpy in accel.py)", calls - run_i - run_o),
-        ("shade kernel", g("shade")),
+        ("shade kernel (with its shadow rays' Embree queries)", g("shade")),
         ("add_shadows kernel", g("add_shadows")),
         ("area-light kernel (scenes with area lights)", g("area lights")),
         ("velocity groups: rest-frame rays with their Embree traversals", moving),
