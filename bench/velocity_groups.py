@@ -144,6 +144,31 @@ def group_rows(spp: int, width: int, height: int, threads: int,
     return rows
 
 
+def pair_rows(spp: int, width: int, height: int, threads: int,
+              pairs: int) -> list[dict[str, Any]]:
+    """The goal's ratio measured as a paired statistic: the static Cornell box and the box
+    as one velocity group rendered alternately ``pairs`` times (after one warm-up each);
+    each pair's CPU time per spp ratio, taken from two renders a second apart, sees
+    nearly the same machine load, so their median is steadier than a ratio of medians
+    on a shared machine. One row per pair; ``ratio`` = 1 group ÷ static."""
+    base = cm.RelrayBench(cm.make_job(cm.job_dict()))
+    benches = {"static": base, "1 group": cm.RelrayBench(base.job,
+                                                         scene=grouped_scene(base.scene, 1))}
+    frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
+           for k, b in benches.items()}
+    for k, b in benches.items():
+        b.render(renderer=frs[k])  # warm-up
+    rows = []
+    for i in range(pairs):
+        order = list(benches) if i % 2 == 0 else list(benches)[::-1]
+        t = {k: benches[k].render(renderer=frs[k]).cpu / spp for k in order}
+        rows.append({"pair": i, "static_cpu_per_spp_s": t["static"],
+                     "group_cpu_per_spp_s": t["1 group"],
+                     "ratio": t["1 group"] / t["static"], "load1": cm.load_average()[0],
+                     "spp": spp, "width": width, "height": height, "threads": threads})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
@@ -153,6 +178,9 @@ def main(argv: list[str] | None = None) -> None:
     for r in group_rows(spp, size, size, 2, repeat):
         print(f"{r['variant']:>24}: {1e3 * r['cpu_per_spp_s']:7.2f} ms/spp  "
               f"{r['over_static']:.2f}x  image diff {r['mean_abs_diff']:.4f}")
+    pairs = pair_rows(spp, size, size, 2, 4 if a.quick else 15)
+    print(f"{'1 group ÷ static, paired':>24}: median "
+          f"{statistics.median(r['ratio'] for r in pairs):.3f} over {len(pairs)} pairs")
     for r in noise_rows(spp, size, size, 2):
         print(f"{r['variant']:>34}: relative MSE {r['rel_mse']:.4f} "
               f"({r['mse_over_static']:.2f}x)")

@@ -68,7 +68,7 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
             log=lambda *a: None)
     for name in ("throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
                  "velocity_groups", "convergence_medians", "equal_error", "adaptive_gain",
-                 "shade_breakdown", "environment_nee", "profile_scenes",
+                 "shade_breakdown", "environment_nee", "profile_scenes", "velocity_group_pairs",
                  "embree_floor"):
         rows = common.read_csv(out / f"{name}.csv")
         assert rows, name

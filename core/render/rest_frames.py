@@ -173,15 +173,14 @@ def moving_hits(static, box_lo, box_hi, st, o, d, t, best, prim, bu, bv, seg_hit
         best[i], prim[i], bu[i], bv[i], seg_hit[i] = b_t, b_p, b_u, b_v, b_s
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
 def blocked1(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tmax,
              t):  # pragma: no cover - compiled
     """Whether the lab segment from event (t, o) along d (float32 o, d, ``tmax``), 0 < s <
     tmax, is blocked by the static BVH ``static`` (0: none; only if it meets the box) or
     by a segment's group of ``st`` at the time the ray passes it (:func:`rest_ray`, the
     whole length: any blocker will do); ``f``, ``w``, ``addr``: an RTCRayHit buffer
-    (:func:`.embree.rayhit_buffer`). Compiled on its own (not inlined), so a caller's
-    fast-math flags never reach the rest-frame arithmetic."""
+    (:func:`.embree.rayhit_buffer`)."""
     x, y, z = np.float64(ox), np.float64(oy), np.float64(oz)
     u, v, q = np.float64(dx), np.float64(dy), np.float64(dz)
     if static != 0 and meets_box(x, y, z, u, v, q, np.float64(tmax), box_lo, box_hi):
@@ -195,7 +194,7 @@ def blocked1(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tma
     return False
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
 def moving_blocked(static, box_lo, box_hi, st, o, d, tmax, t, blocked):
     """:func:`blocked1` of each lab segment (origins ``o``, directions ``d``, lengths
     ``tmax``, origin lab times ``t``) into ``blocked``."""
@@ -203,17 +202,6 @@ def moving_blocked(static, box_lo, box_hi, st, o, d, tmax, t, blocked):
     for i in range(o.shape[0]):
         blocked[i] = blocked1(static, box_lo, box_hi, st, f, w, addr, o[i, 0], o[i, 1],
                               o[i, 2], d[i, 0], d[i, 1], d[i, 2], tmax[i], t[i])
-
-
-def query_args(tracer: Accel | MovingScene | None) -> tuple:
-    """(static scene handle, its box lo, hi, :class:`SegmentTable`) of a tracer, for
-    kernels that trace by themselves (:func:`blocked1`); a static Accel has no segment,
-    None (nothing to hit) neither a handle."""
-    if isinstance(tracer, MovingScene):
-        return tracer.query_args()
-    if tracer is None:
-        return np.uint64(0), np.zeros(3), np.zeros(3), _segments([], np.zeros(3))
-    return tracer.handle, tracer.box_lo, tracer.box_hi, _segments([], tracer.origin)
 
 
 class MovingScene:
@@ -229,8 +217,8 @@ class MovingScene:
                                                                        static.box_hi)
 
     def query_args(self) -> tuple:
-        """(static scene handle (0: none), its box lo, hi, the segments): see
-        :func:`query_args`."""
+        """(static scene handle (0: none), its box lo, hi, the segments), the first
+        arguments of :func:`moving_hits` and :func:`moving_blocked`."""
         return self._handle, *self._box, self.segments
 
     @staticmethod
