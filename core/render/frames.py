@@ -415,7 +415,7 @@ def build_renderer(job: Job, scene: Scene | None = None,
     """A :class:`FrameRenderer` for ``job`` (scene, BVH, tables); ``threads`` overrides;
     ``env_nee``: :func:`prepare`'s."""
     scene = scene if scene is not None else build_scene(job)
-    job = resolved_job(job, scene)  # render.spectral = "auto"
+    job = resolved_job(job)  # render.spectral = "auto" (the drivers' jobs are resolved)
     cam = resolve_camera(job, scene)
     s = job.render if threads is None else replace(job.render, threads=int(threads))
     prep = prepare(scene, s.spectral, env_nee)
