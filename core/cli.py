@@ -39,7 +39,6 @@ from .render.frames import RenderCancelled
 from .runner import render_job
 from .scene import job as jobmod
 from .scene import schema as schemamod
-from .scene.geometry import build_scene
 from .scene.motion import camera_settings, frame_events
 from .scene.spectral_model import AUTO, resolve
 
@@ -258,7 +257,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     check_frame_names(job)
     print(jobmod.job_summary(job))
     if job.render.spectral == AUTO:
-        model, why = resolve(job, build_scene(job))
+        model, why = resolve(job)
         print(f"spectral    auto renders with {model} ({why})")
     cam = camera_settings(job)
     pin = PinholeCamera.from_settings(cam, job.render.width, job.render.height)

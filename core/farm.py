@@ -485,7 +485,7 @@ def render_on_dask(job: Job, client: Any, *, overwrite: bool = False,
     scene = build_scene(job)
     resolve_camera(job, scene)  # user errors here, before any task
     plan = plan_frames(job, overwrite)
-    job = resolved_job(job, scene)  # render.spectral = "auto" (after the plan's digests)
+    job = resolved_job(job)  # render.spectral = "auto" (after the plan's digests)
     del scene
     threads = threads or job.render.threads
     run_id = uuid.uuid4().hex

@@ -38,7 +38,7 @@ def render_job(job: Job, overwrite: bool = False, show_progress: bool = True,
     plan = plan_frames(job, overwrite)  # digests of the input files before they are loaded
     scene = build_scene(job)
     resolve_camera(job, scene)
-    job = resolved_job(job, scene)  # render.spectral = "auto" (after the plan's digests)
+    job = resolved_job(job)  # render.spectral = "auto" (after the plan's digests)
     s = job.render
     reporter.start(job, plan, mode="local", units=len(plan.todo) * s.width * s.height * s.spp,
                    unit="path")

@@ -402,7 +402,7 @@ def test_an_infrared_only_map_is_still_sampled():
     nm = np.array([2000.0, 3000.0])
     px = np.zeros((2, 2, 2), np.float32)
     px[1, 0] = [1.0, 1.0]
-    w = environment.texel_weights(EnvironmentImage(px, 1.0, 0.0, nm))
+    w = environment.texel_weights(environment.texels(EnvironmentImage(px, 1.0, 0.0, nm)))
     assert w[1, 0] > 0.0 and np.count_nonzero(w) == 1
 
 

@@ -533,6 +533,21 @@ def test_auto_exposure_on_the_farm_equals_a_local_render(tmp_path, client, capsy
     assert_same_frames(job.output.dir, local / "out", frames)  # EXR and PNG pixels
 
 
+def test_spectral_auto_on_the_farm_renders_with_the_resolved_model(tmp_path, client):
+    """render.spectral = "auto" with nothing moving: the cluster's frames are the local
+    render's with spectral = "rgb", bit for bit, and their EXRs name rgb."""
+    rest = TINY.replace("beta = [0.3, 0.0, 0.0]", "beta = [0.0, 0.0, 0.0]")
+    auto = load(write_job(tmp_path / "auto", 2, rest.replace("seed = 7", 'seed = 7\n'
+                                                             'spectral = "auto"')))
+    rgb = load(write_job(tmp_path / "rgb", 2, rest.replace("seed = 7", 'seed = 7\n'
+                                                           'spectral = "rgb"')))
+    result = farm.render_on_dask(auto, client, threads=1)
+    assert sorted(result.rendered) == [1, 2] and not result.failed
+    render_job(rgb, show_progress=False)
+    assert_same_frames(auto.output.dir, rgb.output.dir, (1, 2))
+    assert read_exr(auto.output.dir / "f_001.exr")[1]["relray:spectral"] == "rgb"
+
+
 def test_still_in_sample_batches_is_the_same_for_any_number_of_workers(tmp_path, client):
     from relray.core.physics.spectrum import sensor_to_rgb
 

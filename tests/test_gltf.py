@@ -589,6 +589,22 @@ def test_a_node_worldline_and_pivot_convert_axes(tmp_path: Path) -> None:
     np.testing.assert_allclose(m.worldline.t, [0.0, 10.0])
 
 
+@pytest.mark.parametrize("relray", [
+    None, {"velocity": [0, 0, 0]}, {"velocity": [0.1, 0.2, 0.3]},
+    {"worldline": {"t": [0.0, 10.0], "pivot": [[0, 0, 0], [0, 0, -5.0]]}}])
+def test_has_moving_nodes_agrees_with_the_loader(tmp_path: Path, relray) -> None:
+    """gltf.has_moving_nodes (the JSON only) is True exactly when load_gltf_scene finds
+    moving nodes; a malformed extras.relray is the loader's UserError."""
+    import json
+
+    path = tmp_path / "s.gltf"
+    path.write_text(json.dumps(moving_doc(relray)))
+    assert gltf.has_moving_nodes(path) == bool(gltf.load_gltf_scene(path).motions)
+    path.write_text(json.dumps(moving_doc({"velocity": [2.0, 0.0, 0.0]})))
+    with pytest.raises(UserError, match="velocity"):
+        gltf.has_moving_nodes(path)
+
+
 def test_a_zero_velocity_node_is_static(tmp_path: Path) -> None:
     import json
 

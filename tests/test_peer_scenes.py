@@ -13,7 +13,9 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
+from relray.bench import common as cm
 from relray.bench import peer_scenes as ps
+from relray.bench import textures
 from relray.core.render import environment as env_mod
 from relray.core.render import integrator
 
@@ -41,6 +43,26 @@ def _read_ply(path):
     f = np.frombuffer(data, [("n", "u1"), ("i", "<i4", (3,))], nf, end + v.nbytes)
     assert (f["n"] == 3).all()
     return props, v, f["i"]
+
+
+def _mitsuba(bench, width, height, folder):
+    """The Mitsuba scene dict :func:`ps.mitsuba_files` writes into ``folder``."""
+    return json.loads(ps.mitsuba_files(bench.job, bench.scene, width, height, folder)
+                      .read_text())
+
+
+def _material_shapes(d, scene, folder):
+    """Per material of ``scene``: (index, material, its Mitsuba shape in ``d``, and its
+    PLY's properties, vertices and faces)."""
+    for i, m in enumerate(scene.materials):
+        sh = d[f"shape_{i}_{m.name}"]
+        yield (i, m, sh, *_read_ply(folder / sh["filename"]))
+
+
+def _cycles(bench, width, height, path):
+    """The arrays of the npz :func:`ps.cycles_npz` writes at ``path``."""
+    with np.load(ps.cycles_npz(bench.job, bench.scene, width, height, path)) as f:
+        return dict(f)
 
 
 def _read_exr(path):
@@ -74,7 +96,7 @@ def test_envmap_frame_gives_relrays_map_coordinates(rot):
 
 def test_environment_scene_to_mitsuba(env_bench, tmp_path):
     job, scene = env_bench.job, env_bench.scene
-    d = json.loads(ps.mitsuba_files(job, scene, 24, 16, tmp_path).read_text())
+    d = _mitsuba(env_bench, 24, 16, tmp_path)
     assert d["integrator"] == {"type": "path", "max_depth": job.render.max_depth,
                                "rr_depth": integrator.RR_DEPTH, "hide_emitters": False}
     assert job.render.max_depth == 4
@@ -90,13 +112,11 @@ def test_environment_scene_to_mitsuba(env_bench, tmp_path):
     assert big.shape == (src.shape[0] * k, src.shape[1] * k, 3)
     assert np.array_equal(big[::k, ::k], src) and np.array_equal(big[k - 1::k, 1::k], src)
     # one PLY per material, the triangles corner for corner with relray's shading normals
-    shapes = {key: v for key, v in d.items() if key.startswith("shape_")}
-    assert len(shapes) == len(scene.materials) == 1
-    sh = shapes["shape_0_grey"]
-    assert sh["type"] == "ply" and sh["face_normals"] is False
+    assert len([key for key in d if key.startswith("shape_")]) == len(scene.materials) == 1
+    [(_, m, sh, props, v, faces)] = _material_shapes(d, scene, tmp_path)
+    assert m.name == "grey" and sh["type"] == "ply" and sh["face_normals"] is False
     assert sh["bsdf"]["bsdf"]["reflectance"]["value"] == pytest.approx([0.6, 0.6, 0.6])
     assert "emitter" not in sh
-    props, v, faces = _read_ply(tmp_path / sh["filename"])
     assert props == ["x", "y", "z", "nx", "ny", "nz"]
     tris = v[faces]
     assert tris[..., :3] == pytest.approx(np.asarray(scene.triangles), abs=1e-6)
@@ -104,16 +124,14 @@ def test_environment_scene_to_mitsuba(env_bench, tmp_path):
 
 
 def test_heavy_scene_to_mitsuba(heavy_bench, tmp_path):
-    job, scene = heavy_bench.job, heavy_bench.scene
+    scene = heavy_bench.scene
     assert len(scene.triangles) > 2000
-    d = json.loads(ps.mitsuba_files(job, scene, 16, 16, tmp_path).read_text())
+    d = _mitsuba(heavy_bench, 16, 16, tmp_path)
     assert d["integrator"]["max_depth"] == 8 and "emitter_environment" not in d
     ids = np.asarray(scene.material_ids)
     total = 0
-    for i, m in enumerate(scene.materials):
-        sh = d[f"shape_{i}_{m.name}"]
+    for i, m, sh, props, v, faces in _material_shapes(d, scene, tmp_path):
         assert sh["type"] == "ply" and sh["face_normals"] is True
-        props, v, faces = _read_ply(tmp_path / sh["filename"])
         assert props == ["x", "y", "z"]
         assert v[faces] == pytest.approx(np.asarray(scene.triangles)[ids == i], abs=1e-6)
         total += len(faces)
@@ -138,14 +156,12 @@ def tex_bench(tmp_path_factory):
 
 
 def test_textured_scene_to_mitsuba(tex_bench, tmp_path):
-    job, scene = tex_bench.job, tex_bench.scene
-    d = json.loads(ps.mitsuba_files(job, scene, 16, 16, tmp_path).read_text())
+    scene = tex_bench.scene
+    d = _mitsuba(tex_bench, 16, 16, tmp_path)
     ids = np.asarray(scene.material_ids)
     uv = np.asarray(scene.uvs, np.float64)
-    for i, m in enumerate(scene.materials):
-        sh = d[f"shape_{i}_{m.name}"]
+    for i, m, sh, props, v, faces in _material_shapes(d, scene, tmp_path):
         refl = sh["bsdf"]["bsdf"]["reflectance"]
-        props, v, faces = _read_ply(tmp_path / sh["filename"])
         assert props == ["x", "y", "z", "u", "v"]
         if m.base_color_texture is None:
             assert refl["type"] == "rgb"
@@ -166,11 +182,10 @@ def test_textured_scene_to_mitsuba(tex_bench, tmp_path):
 
 
 def test_textured_scene_to_cycles(tex_bench, tmp_path):
-    job, scene = tex_bench.job, tex_bench.scene
-    path = ps.cycles_npz(job, scene, 16, 16, tmp_path / "scene.npz")
-    with np.load(path) as f:
-        assert f["uvs"] == pytest.approx(ps.texture_uvs(scene))
-        mats = json.loads(str(f["materials"]))
+    scene = tex_bench.scene
+    f = _cycles(tex_bench, 16, 16, tmp_path / "scene.npz")
+    assert f["uvs"] == pytest.approx(ps.texture_uvs(scene))
+    mats = json.loads(str(f["materials"]))
     for m, spec in zip(mats, scene.materials, strict=True):
         t = spec.base_color_texture
         assert m["texture"] == ("" if t is None else str(t.file))
@@ -180,46 +195,42 @@ def test_textured_scene_to_cycles(tex_bench, tmp_path):
         4.0 * np.asarray(scene.uvs, np.float64)[ids == white])
 
 
-def test_textures_that_would_be_dropped_are_refused(tmp_path):
-    from relray.bench import common as cm
-    from relray.bench import textures
-
-    data = textures.textured_cornell(tmp_path)
-    textures.write_png(tmp_path / "tilted.png", np.tile([0.7, 0.5, 0.9], (8, 8, 1)))
+def _textured_bench(folder, material, key, file):
+    """The textured Cornell box at 8 × 8 with ``key`` = ``file`` on ``material``."""
+    data = textures.textured_cornell(folder)
     for m in data["materials"]:
-        if m["name"] == "white":
-            m["normal_texture"] = "tilted.png"
-    bench = cm.RelrayBench(cm.make_job(data, tmp_path / "job.toml", width=8, height=8))
+        if m["name"] == material:
+            m[key] = file
+    return cm.RelrayBench(cm.make_job(data, folder / "job.toml", width=8, height=8))
+
+
+def test_textures_that_would_be_dropped_are_refused(tmp_path):
+    textures.write_png(tmp_path / "tilted.png", np.tile([0.7, 0.5, 0.9], (8, 8, 1)))
+    bench = _textured_bench(tmp_path, "white", "normal_texture", "tilted.png")
     with pytest.raises(ValueError, match="normal map"):
         ps.mitsuba_files(bench.job, bench.scene, 8, 8, tmp_path / "m")
     with pytest.raises(ValueError, match="normal map"):
         ps.cycles_npz(bench.job, bench.scene, 8, 8, tmp_path / "c.npz")
-    data = textures.textured_cornell(tmp_path)
-    for m in data["materials"]:
-        if m["name"] == "red":
-            m["emission_texture"] = "noise.png"
-    bench = cm.RelrayBench(cm.make_job(data, tmp_path / "job.toml", width=8, height=8))
+    bench = _textured_bench(tmp_path, "red", "emission_texture", "noise.png")
     with pytest.raises(ValueError, match="emission"):
         ps.mitsuba_files(bench.job, bench.scene, 8, 8, tmp_path / "m2")
 
 
 def test_environment_scene_to_cycles(env_bench, tmp_path):
     job, scene = env_bench.job, env_bench.scene
-    path = ps.cycles_npz(job, scene, 24, 16, tmp_path / "scene.npz")
-    with np.load(path) as f:
-        assert np.array_equal(f["triangles"], np.asarray(scene.triangles, np.float64))
-        assert f["normals"] == pytest.approx(np.asarray(scene.normals, np.float64))
-        assert (int(f["width"]), int(f["height"])) == (24, 16)
-        env = json.loads(str(f["environment"]))
+    f = _cycles(env_bench, 24, 16, tmp_path / "scene.npz")
+    assert np.array_equal(f["triangles"], np.asarray(scene.triangles, np.float64))
+    assert f["normals"] == pytest.approx(np.asarray(scene.normals, np.float64))
+    assert (int(f["width"]), int(f["height"])) == (24, 16)
+    env = json.loads(str(f["environment"]))
     assert env == {"file": str(job.scene.environment.file), "strength": 1.0,
                    "rotation_z": 0.0}
 
 
 def test_heavy_scene_to_cycles_has_no_world_and_flat_normals(heavy_bench, tmp_path):
-    path = ps.cycles_npz(heavy_bench.job, heavy_bench.scene, 16, 16, tmp_path / "h.npz")
-    with np.load(path) as f:
-        assert "normals" not in f.files and "environment" not in f.files
-        assert len(f["triangles"]) == len(heavy_bench.scene.triangles)
+    f = _cycles(heavy_bench, 16, 16, tmp_path / "h.npz")
+    assert "normals" not in f and "environment" not in f
+    assert len(f["triangles"]) == len(heavy_bench.scene.triangles)
 
 
 def test_cycles_peer_maps_depth_to_bounces(tmp_path):

@@ -3,12 +3,14 @@ is shifted, and the rgb render it picks is the explicit rgb render, bit for bit.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 from render_helpers import base_job, make_job, render
+from test_gltf import moving_doc
 
 from relray.core.scene.geometry import build_scene
 from relray.core.scene.spectral_model import resolve, resolved_job
@@ -23,8 +25,7 @@ PANEL = {"shape": "quad", "material": "lamp",
 def model(tmp_path, **sections) -> tuple[str, str]:
     data = base_job(**{"materials": [GREY, LAMP], "objects": [BALL, PANEL], **sections})
     data["render"] = {**data["render"], "spectral": "auto", **sections.get("render", {})}
-    job = make_job(data, tmp_path)
-    return resolve(job, build_scene(job))
+    return resolve(make_job(data, tmp_path))
 
 
 @pytest.mark.parametrize(("sections", "want"), [
@@ -50,8 +51,27 @@ def test_a_given_model_is_kept(tmp_path):
     data = base_job(materials=[GREY], objects=[BALL],
                     render={"spectral": "seed-gaussian"})
     job = make_job(data, tmp_path)
-    assert resolve(job, build_scene(job)) == ("seed-gaussian", "as given")
-    assert resolved_job(job, build_scene(job)) is job
+    assert resolve(job) == ("seed-gaussian", "as given")
+    assert resolved_job(job) is job
+
+
+@pytest.mark.parametrize(("relray", "want"), [
+    (None, "rgb"),
+    ({"velocity": [0.0, 0.0, 0.0]}, "rgb"),
+    ({"velocity": [0.0, 0.0, -0.3]}, "cie1931"),
+    ({"worldline": {"t": [0.0, 10.0], "pivot": [[0, 0, 0], [0, 0, -5.0]]}}, "cie1931"),
+])
+def test_auto_sees_the_moving_nodes_of_a_gltf_scene(tmp_path, relray, want):
+    """A glTF mesh node moving by its extras.relray makes "auto" spectral, a node at rest
+    does not; read from the file's JSON, it agrees with the velocity groups of the scene
+    built from it."""
+    path = tmp_path / "s.gltf"
+    path.write_text(json.dumps(moving_doc(relray)))
+    job = make_job(base_job(scene={"file": str(path)}, render={"spectral": "auto"}),
+                   tmp_path)
+    got, why = resolve(job)
+    assert got == want, why
+    assert bool(build_scene(job).groups) == (want == "cie1931")
 
 
 def test_auto_at_rest_renders_the_rgb_image(tmp_path):
@@ -103,3 +123,14 @@ def test_cli_info_and_metadata_name_the_model_used(tmp_path, beta, want):
     exr = next((tmp_path / "out").glob("*.exr"))
     spec = oiio.ImageInput.open(str(exr)).spec()
     assert spec.getattribute("relray:spectral") == want
+
+
+def test_cli_info_resolves_auto_from_a_moving_gltf_node(tmp_path):
+    """relray info decides "auto" from the job and the glTF's node extras."""
+    (tmp_path / "s.gltf").write_text(json.dumps(moving_doc({"velocity": [0.3, 0.0, 0.0]})))
+    job = tmp_path / "job.toml"
+    job.write_text(JOB.format(beta=0.0) + '[scene]\nfile = "s.gltf"\n')
+    info = subprocess.run([sys.executable, "-m", "relray.core.cli", "info", str(job)],
+                          capture_output=True, text=True, cwd=tmp_path)
+    assert info.returncode == 0, info.stderr
+    assert "auto renders with cie1931 (moving bodies shift wavelengths)" in info.stdout

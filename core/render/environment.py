@@ -92,22 +92,27 @@ class KernelEnvironment(NamedTuple):
     rot: float         # rotation_z in radians
     row: int           # the emission-table row of E(λ) (rgb: ones)
     nm: np.ndarray     # float64 (B,): a spectral map's band wavelengths (colour map: empty)
+    power: float       # Σ_t of the texels' sampling weights (:func:`texel_weights`)
 
 
-def texel_rgb(image: EnvironmentImage) -> np.ndarray:
-    """The map's linear Rec.709 radiance per texel, float64 (H, W, 3), × strength,
-    negative components clamped to 0 (a grey image gives its value on all three; a
-    spectral map its bands' rest-frame colour, :func:`band_rgb`)."""
+class Texels(NamedTuple):
+    """A map's texels, read once per :func:`kernel_environment` (:func:`texels`)."""
+
+    rgb: np.ndarray            # float64 (H, W, 3): linear Rec.709 radiance × strength, ≥ 0
+    bands: np.ndarray | None   # float64 (H, W, B): a spectral map's bands (colour map: None)
+
+
+def texels(image: EnvironmentImage) -> Texels:
+    """The map's linear Rec.709 radiance per texel, × strength, negative components
+    clamped to 0 (a grey image gives its value on all three; a spectral map its bands'
+    rest-frame colour, :func:`band_rgb`), and a spectral map's band radiance × strength,
+    clamped to ≥ 0."""
     if image.spectral:
-        return np.clip(texel_bands(image) @ band_rgb(image.wavelengths_nm), 0.0, None)
+        bands = np.clip(np.asarray(image.pixels, np.float64), 0.0, None) * image.strength
+        return Texels(np.clip(bands @ band_rgb(image.wavelengths_nm), 0.0, None), bands)
     px = np.asarray(image.pixels, np.float64)
     rgb = px[..., :3] if px.shape[2] >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    return np.clip(rgb, 0.0, None) * image.strength
-
-
-def texel_bands(image: EnvironmentImage) -> np.ndarray:
-    """A spectral map's band radiance × strength, clamped to ≥ 0, float64 (H, W, B)."""
-    return np.clip(np.asarray(image.pixels, np.float64), 0.0, None) * image.strength
+    return Texels(np.clip(rgb, 0.0, None) * image.strength, None)
 
 
 def band_rgb(nm: np.ndarray) -> np.ndarray:
@@ -136,14 +141,14 @@ def texel_power(rgb: np.ndarray) -> np.ndarray:
     return (rgb @ LUMA) * solid_angles(h, w)[:, None]
 
 
-def texel_weights(image: EnvironmentImage) -> np.ndarray:
+def texel_weights(tx: Texels) -> np.ndarray:
     """The sampling weight of each texel (H, W): Y_t ΔΩ_t, plus a spectral texel's
     :data:`SPECTRAL_FLOOR` term (module docstring)."""
-    power = texel_power(texel_rgb(image))
-    if image.spectral:
+    power = texel_power(tx.rgb)
+    if tx.bands is not None:
         h, w = power.shape
         y_flat = float(spectrum.y_of(np.ones(spectrum.GRID_N, np.float32)))
-        power = power + (SPECTRAL_FLOOR * y_flat * texel_bands(image).mean(axis=2)
+        power = power + (SPECTRAL_FLOOR * y_flat * tx.bands.mean(axis=2)
                          * solid_angles(h, w)[:, None])
     return power
 
@@ -195,10 +200,11 @@ def base_row(mode: str) -> np.ndarray:
     return spectrum.d65_ext()
 
 
-def power_estimate(image: EnvironmentImage, radius: float) -> float:
+def power_estimate(env: KernelEnvironment, radius: float) -> float:
     """The map's power through the scene's bounding sphere, Σ Y_t ΔΩ_t · π r² (as the
-    constant sky's L · 4π · π r²): its share in light selection."""
-    return float(texel_weights(image).sum()) * math.pi * radius * radius
+    constant sky's L · 4π · π r²; the sum is ``env.power``): its share in light
+    selection."""
+    return env.power * math.pi * radius * radius
 
 
 def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> KernelEnvironment:
@@ -207,15 +213,17 @@ def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> K
     if image is None:
         return KernelEnvironment(False, np.zeros((1, 1, 4), np.float32), np.array([0.0, 1.0]),
                                  np.array([[0.0, 1.0]]), np.zeros((1, 1), np.float32), 0.0,
-                                 max(row, 0), np.zeros(0))
-    marg, cond, pmf = distribution(texel_weights(image))
-    if image.spectral and mode != "rgb":
-        tex = texel_bands(image).astype(np.float32)
+                                 max(row, 0), np.zeros(0), 0.0)
+    tx = texels(image)
+    weights = texel_weights(tx)
+    marg, cond, pmf = distribution(weights)
+    if tx.bands is not None and mode != "rgb":
+        tex = tx.bands.astype(np.float32)
         nm = np.asarray(image.wavelengths_nm, np.float64)
     else:
-        tex, nm = texel_table(texel_rgb(image), mode), np.zeros(0)
+        tex, nm = texel_table(tx.rgb, mode), np.zeros(0)
     return KernelEnvironment(True, tex, marg, cond, pmf, math.radians(image.rotation_z), row,
-                             nm)
+                             nm, float(weights.sum()))
 
 
 # ------------------------------------------------------------------ device functions

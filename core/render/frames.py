@@ -130,8 +130,8 @@ def prepare(scene: Scene, mode: str, env_nee: bool = True) -> PreparedScene:
     env_image = scene.environment
     env_row = (tables.add_emission_row(environment.base_row(mode)) if env_image is not None
                else -1)
-    env_power = (environment.power_estimate(env_image, radius)
-                 if env_image is not None and env_nee else 0.0)
+    env = environment.kernel_environment(env_image, mode, env_row)
+    env_power = environment.power_estimate(env, radius) if env.on and env_nee else 0.0
     lights = build_lights(scene, tables, origin, geom["area"].astype(np.float64), radius,
                           env_power)
     tracer: Accel | MovingScene | None = accel
@@ -145,8 +145,7 @@ def prepare(scene: Scene, mode: str, env_nee: bool = True) -> PreparedScene:
     emits = tables.mat_emit_row[scene.material_ids[n_geometry:n_static]] >= 0
     area_tris = np.arange(n_geometry, n_static, dtype=np.int32)[emits]
     kscene = kernel_scene(extent, scene.normals, scene.material_ids, tables, lights, geom,
-                          segments, area_tris,
-                          environment.kernel_environment(env_image, mode, env_row), textures)
+                          segments, area_tris, env, textures)
     return PreparedScene(scene, accel, tables, lights, kscene, radius, mode, tracer, origin)
 
 
@@ -416,7 +415,7 @@ def build_renderer(job: Job, scene: Scene | None = None,
     """A :class:`FrameRenderer` for ``job`` (scene, BVH, tables); ``threads`` overrides;
     ``env_nee``: :func:`prepare`'s."""
     scene = scene if scene is not None else build_scene(job)
-    job = resolved_job(job, scene)  # render.spectral = "auto"
+    job = resolved_job(job)  # render.spectral = "auto" (the drivers' jobs are resolved)
     cam = resolve_camera(job, scene)
     s = job.render if threads is None else replace(job.render, threads=int(threads))
     prep = prepare(scene, s.spectral, env_nee)

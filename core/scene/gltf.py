@@ -803,6 +803,21 @@ def find_camera(
                     lambda: _first_camera(_read_document(path, key, job_file)[0]))
 
 
+def has_moving_nodes(
+    path: str | Path, *, key: str = "scene.file", job_file: str | Path | None = None
+) -> bool:
+    """Whether a mesh node of the file moves (a velocity or a worldline in its
+    ``extras.relray``, as :func:`load_gltf_scene` reads it). Reads only the JSON part."""
+    path = Path(path)
+    return _guarded(path, key, job_file,
+                    lambda: _any_moving_node(_read_document(path, key, job_file)[0]))
+
+
+def _any_moving_node(doc: dict[str, Any]) -> bool:
+    return any("mesh" in node and _node_motion(node, index, world) is not None
+               for index, node, world in _walk_nodes(doc))
+
+
 def load_gltf(
     path: str | Path, *, key: str = "scene.file", job_file: str | Path | None = None
 ) -> GltfResult:

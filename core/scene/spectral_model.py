@@ -24,14 +24,26 @@ from dataclasses import replace
 
 import numpy as np
 
+from . import gltf
 from .description import Job
-from .geometry import Scene
 from .motion import frame_events
+from .worldlines import is_moving
 
 AUTO = "auto"
 
 
-def resolve(job: Job, scene: Scene) -> tuple[str, str]:
+def has_moving_bodies(job: Job) -> bool:
+    """Whether a body of the job moves: an object with a ``velocity`` or a ``worldline``,
+    or a glTF mesh node with one in its ``extras.relray`` (exactly when the scene has
+    velocity groups, :func:`.worldlines.rest_frame_offsets`). Read from the job and the
+    glTF's JSON part only: no mesh or BVH is built."""
+    if any(is_moving(obj) for obj in job.scene.objects):
+        return True
+    return job.scene.file is not None and gltf.has_moving_nodes(job.scene.file,
+                                                                job_file=job.path)
+
+
+def resolve(job: Job) -> tuple[str, str]:
     """(model, reason) for ``job`` (``render.spectral`` as given unless it is "auto")."""
     given = job.render.spectral
     if given != AUTO:
@@ -40,17 +52,18 @@ def resolve(job: Job, scene: Scene) -> tuple[str, str]:
         return "cie1931", "spectral-exr output needs spectra"
     if not job.render.doppler:
         return "rgb", "doppler = false: no wavelength shifts"
-    if scene.groups:
-        return "cie1931", f"{len(scene.groups)} moving velocity group(s) shift wavelengths"
+    if has_moving_bodies(job):
+        return "cie1931", "moving bodies shift wavelengths"
     if any(np.any(np.asarray(ev.beta) != 0.0) for _, ev in frame_events(job)):
         return "cie1931", "the camera moves: Doppler shifts wavelengths"
     return "rgb", "nothing moves: no wavelength shifts"
 
 
-def resolved_job(job: Job, scene: Scene) -> Job:
+def resolved_job(job: Job) -> Job:
     """``job`` with ``render.spectral`` resolved (:func:`resolve`); the same job when it
-    was not "auto"."""
-    model, _ = resolve(job, scene)
+    was not "auto". The one place "auto" is decided: the drivers call it once on the job
+    they render, and :func:`..render.frames.build_renderer` on a job given as is."""
+    model, _ = resolve(job)
     if model == job.render.spectral:
         return job
     return replace(job, render=replace(job.render, spectral=model))

@@ -3,6 +3,7 @@ named, renders that would not fit refused."""
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
 import bpy
@@ -35,6 +36,27 @@ def odd_material(folder) -> bpy.types.Material:
     bsdf.inputs["Transmission Weight"].default_value = 1.0
     bsdf.inputs["Roughness"].default_value = 0.3
     return mat
+
+
+def export_farm(folder: Path) -> dict:
+    """Export the farm job to ``folder`` (the add-on's operator); its job.toml's table."""
+    assert bpy.ops.relray.export_farm(directory=str(folder)) == {"FINISHED"}
+    return tomllib.loads((folder / "job.toml").read_text())
+
+
+def f12_and_farm_png(scene, folder: Path) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Frame 1 of ``scene`` as two 8-bit RGB PNGs: F12's, saved by Blender to
+    ``folder``/f12_.png, and `relray render`'s of the farm job exported to
+    ``folder``/farm (the same seed, so the same linear pixels); and that job's table."""
+    rendering.set_output(scene, folder, "f12_", "PNG")
+    scene.render.image_settings.color_mode = "RGB"
+    rendering.render_still(scene, write=True)
+    f12 = rendering.load_image(folder / "f12_.png")[..., :3]
+    out = folder / "farm"
+    job = export_farm(out)
+    cli = ext_module("core.cli")
+    assert cli.main(["render", str(out / "job.toml"), "--quiet", "--frames", "1-1"]) == 0
+    return f12, rendering.load_image(out / "out" / "frame_0001.png")[..., :3], job
 
 
 def test_a_missing_image_is_magenta_and_every_ignored_feature_named_once(cornell, engine,
@@ -100,10 +122,7 @@ def test_the_noise_threshold_stops_converged_pixels(cornell, engine, tmp_path):
     scene.relray.adaptive_threshold = 0.2
     rendering.render_still(scene)
     assert engine.RESULTS[1]["paths"] < 0.8 * full
-    assert bpy.ops.relray.export_farm(directory=str(tmp_path / "farm")) == {"FINISHED"}
-    import tomllib
-
-    job = tomllib.loads((tmp_path / "farm" / "job.toml").read_text())
+    job = export_farm(tmp_path / "farm")
     assert job["render"]["noise_threshold"] == pytest.approx(0.2)
 
 
@@ -114,20 +133,9 @@ def test_the_farm_png_goes_through_the_scenes_view_transform(cornell, engine, tm
     scene = cornell
     scene.view_settings.view_transform = "AgX"
     scene.view_settings.exposure = 2.0
-    rendering.set_output(scene, tmp_path, "f12_", "PNG")
-    scene.render.image_settings.color_mode = "RGB"
-    rendering.render_still(scene, write=True)
-    f12 = rendering.load_image(tmp_path / "f12_.png")[..., :3]
-    out = tmp_path / "farm"
-    assert bpy.ops.relray.export_farm(directory=str(out)) == {"FINISHED"}
-    import tomllib
-
-    job = tomllib.loads((out / "job.toml").read_text())
+    f12, farm, job = f12_and_farm_png(scene, tmp_path)
     assert job["output"]["view_transform"]["view"] == "AgX"
-    assert (out / job["output"]["view_transform"]["config"]).is_file()
-    cli = ext_module("core.cli")
-    assert cli.main(["render", str(out / "job.toml"), "--quiet", "--frames", "1-1"]) == 0
-    farm = rendering.load_image(out / "out" / "frame_0001.png")[..., :3]
+    assert (tmp_path / "farm" / job["output"]["view_transform"]["config"]).is_file()
     assert np.abs(farm - f12).mean() * 255 < 2.0, np.abs(farm - f12).mean() * 255
     assert job["output"]["exposure"] == 2.0
     plain = rendering.srgb_encode(4.0 * engine.RESULTS[1]["rgba"][..., :3])
@@ -158,22 +166,13 @@ def test_the_farm_png_carries_the_views_gamma_and_curves(cornell, engine, tmp_pa
     scene.view_settings.gamma = 1.6
     s_curve(scene)
     scene.render.dither_intensity = 0.0  # Blender's PNG dither adds ±1 code of noise
-    rendering.set_output(scene, tmp_path, "f12_", "PNG")
-    scene.render.image_settings.color_mode = "RGB"
-    rendering.render_still(scene, write=True)
-    f12 = rendering.load_image(tmp_path / "f12_.png")[..., :3]
+    f12, farm, table = f12_and_farm_png(scene, tmp_path)
     out = tmp_path / "farm"
-    assert bpy.ops.relray.export_farm(directory=str(out)) == {"FINISHED"}
-    import tomllib
-
-    view = tomllib.loads((out / "job.toml").read_text())["output"]["view_transform"]
+    view = table["output"]["view_transform"]
     assert view["gamma"] == pytest.approx(1.6) and len(view["curves"]["red"]) == 257
     warnings: list[str] = []
     ext_module("relblend.farm").colour_management(scene, tmp_path / "cm", warnings)
     assert warnings == []  # nothing left out any more
-    cli = ext_module("core.cli")
-    assert cli.main(["render", str(out / "job.toml"), "--quiet", "--frames", "1-1"]) == 0
-    farm = rendering.load_image(out / "out" / "frame_0001.png")[..., :3]
     diff = np.abs(farm - f12) * 255
     print(f"farm vs F12 with gamma and curves: mean {diff.mean():.3f}, max {diff.max():.0f} "
           "codes")
