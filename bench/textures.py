@@ -84,15 +84,17 @@ def rows(spp: int, size: int, threads: int, rounds: int) -> list[dict]:
             for k, v in rates.items()]
 
 
-def baseline_rows(baseline: Path, spp: int, rounds: int) -> list[dict]:
+def baseline_rows(baseline: Path, spp: int, rounds: int,
+                  labels: tuple[str, str] = ("before textures", "with textures")) -> list[dict]:
     """The untextured Cornell box (presets/cornell.toml, its 256², ``spp``, 1 thread)
-    with ``bench/throughput.py`` of this checkout and of ``baseline`` (a copy of the code
-    before textures, e.g. ``git archive <commit> | tar -x -C DIR/relray``), alternated
-    ``rounds`` times after one warm-up run of each (kernel compilation): the cost of the
-    texture check for scenes without textures."""
+    with ``bench/throughput.py`` of this checkout and of ``baseline`` (a copy of earlier
+    code, e.g. ``git archive <commit> | tar -x -C DIR/relray``), alternated ``rounds``
+    times after one warm-up run of each (kernel compilation); ``labels`` name (the
+    earlier code, this code). With the code before textures: the cost of the texture
+    check for scenes without textures."""
     here = Path(__file__).resolve().parents[1]
     job = here / "presets" / "cornell.toml"
-    trees = {"before textures": baseline, "with textures": here}
+    trees = dict(zip(labels, (baseline, here), strict=True))
     rates: dict[str, list[float]] = {k: [] for k in trees}
     for k_round in range(rounds + 1):
         for name, tree in trees.items():
@@ -104,7 +106,7 @@ def baseline_rows(baseline: Path, spp: int, rounds: int) -> list[dict]:
             rate = float(re.search(r"paths/CPU-s\s+([0-9.]+) M", out).group(1)) * 1e6
             if k_round:
                 rates[name].append(rate)
-    base = statistics.median(rates["before textures"])
+    base = statistics.median(rates[labels[0]])
     return [{"code": k, "spp": spp, "rounds": rounds,
              "paths_per_cpu_s": statistics.median(v),
              "over_before": statistics.median(v) / base,
