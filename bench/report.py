@@ -970,7 +970,8 @@ def _section_throughput(add, d, plots, md, meta) -> None:
                        ("Embree share of CPU", lambda r: 100 * r["embree_share"], ".1f"),
                        ("ns per ray (CPU)", "ns_per_ray_cpu", ".0f"),
                        ("load", "load1", ".1f")]))
-        add("\n(M = millions; Embree share in %.)\n")
+        add("\n(M = millions; Embree share in %, of the nearest-hit queries: a static "
+            "scene's shadow rays are traced inside the shade kernel, §6.)\n")
     fl = d["embree_floor"]
     if fl:
         f = fl[0]
@@ -1371,8 +1372,8 @@ def _section_moving(add, d) -> None:
             "nothing for moving objects (a scene without them never builds a "
             "`MovingScene`, and nothing is pending on its paths).\n")
     add("Each lab ray is carried through the static BVH and every segment in one compiled "
-        "loop (`rest_frames.moving_hits`; shadow rays `rest_frames.blocked1`, called from "
-        "inside the shade kernel): the static BVH only when the ray meets its box (with "
+        "loop (`rest_frames.moving_hits`; shadow rays `rest_frames.moving_blocked`, a pass "
+        "after the shade kernel): the static BVH only when the ray meets its box (with "
         "the whole room moving it holds only the light), then per segment the rest-frame "
         "ray (boost, aberration, the emission window and a bounding-sphere test, "
         "`rest_frames.rest_ray`) and, if it can reach the group, Embree's query on the "
@@ -1382,12 +1383,22 @@ def _section_moving(add, d) -> None:
         "for its next-event estimation; the lanes' shift as the path leaves the body "
         "waits for its next hit, where one logarithm serves both "
         "(`integrator.pending_shift`).\n")
-    add("Next steps, by expected gain: (1) precomputed per-segment constants (γ, "
-        "γ²/(γ+1)) in the kernel scene, which `rest_ray`, `lab_offset` and the Doppler "
-        "factors derive per ray from 1/γ; (2) for one group of one segment, the "
-        "continuation and shadow rays written in its rest frame by `shade` (no boost per "
-        "query); (3) a bounding box per group instead of a sphere (for small moving "
-        "objects; the whole room meets either).\n")
+    add("This round made the static scenes faster too (Embree through its C API, shadow "
+        "rays inside the shade kernel, §6), which raises this ratio although the moving "
+        "path also got cheaper per ray. Per stage (§6, *Per scene*), the whole room as one "
+        "group spends its extra time in the rest-frame traversal (the rest-frame "
+        "arithmetic of every camera, continuation and shadow ray, and a static box test "
+        "against the light) and in `shade`'s frame changes at every hit (two aberrations, "
+        "two Doppler factors, the lanes' table columns).\n")
+    add("Next steps, by expected gain: (1) the moving scene's shadow rays inside the shade "
+        "kernel as a static scene's are (tried this round as a compiled call per shadow "
+        "ray: passing the segment table's arrays to it cost more than the pass it saved; "
+        "it needs the rest-frame arithmetic inlined with the kernel's fast-math flags "
+        "kept off it); (2) precomputed per-segment constants (γ, γ²/(γ+1)) in the kernel "
+        "scene, which `rest_ray`, `lab_offset` and the Doppler factors derive per ray "
+        "from 1/γ; (3) for one group of one segment, the continuation rays written in its "
+        "rest frame by `shade` (no boost per query); (4) a bounding box per group instead "
+        "of a sphere (for small moving objects; the whole room meets either).\n")
     noise = d["moving_emitter_noise"]
     if noise:
         n0 = noise[0]
@@ -1520,10 +1531,11 @@ def _section_recommendations(add, d) -> None:
         "ray meets the static BVH's box, then every segment's rest-frame ray and its BVH, "
         "in one compiled pass; no per-group passes, buffers, merges or culling heuristic "
         "(§5b).")
-    add("- **Shadow rays traced inside the shade kernel**: no shadow-ray buffer, Embree "
-        "call per wavefront or `add_shadows` pass (alpha-masked scenes still use them, "
-        "their holes need nearest-hit queries); the shade breakdown (§6) shows what the "
-        "shadow rays cost inside the kernel.\n")
+    add("- **Shadow rays of static scenes traced inside the shade kernel**: no shadow-ray "
+        "buffer, Embree call per wavefront or `add_shadows` pass (alpha-masked scenes "
+        "still use them, their holes need nearest-hit queries, and moving scenes their "
+        "rest-frame pass); the shade breakdown (§6) shows what the shadow rays cost "
+        "inside the kernel.\n")
     add(f"**Where a Cornell path's {total:.0f} ns go**: the nearest-hit queries "
         f"{emb_i:.0f} ns; the shade kernel {shade:.0f} ns, of which about {emb_o:.0f} ns "
         "are its shadow rays' Embree queries (occluded rays per path × Embree's own ns per "
