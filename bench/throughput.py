@@ -141,8 +141,9 @@ class StageMeter:
         self._undo.append(lambda: setattr(owner, name, orig))
 
     def __enter__(self) -> StageMeter:
-        # shade traces its shadow rays itself: the third value it returns counts them
-        self._wrap(integrator_mod, "shade", "shade", lambda a, out: out[2])
+        # shade traces a static scene's shadow rays itself: those it made (its third
+        # value) less those it left to trace (its second)
+        self._wrap(integrator_mod, "shade", "shade", lambda a, out: out[2] - out[1])
         for stage, targets in self.stages.items():
             for owner, name in targets:
                 self._wrap(owner, name, stage)
