@@ -349,3 +349,171 @@ class CoefficientCache:
                 logging.getLogger("relray").warning(
                     "warning: cannot write the spectrum cache %s (%s): spectra are fitted "
                     "again on every run", path, why)
+
+
+# ------------------------------------------------------------ compiled per-colour fit
+#: The compiled fit's sums over the band nodes may be reordered (vectorised); the
+#: sigmoid itself is evaluated exactly as :func:`sigmoid` (no fast reciprocals).
+_SUMS = {"reassoc", "contract"}
+#: |x| bound of the single-precision Jacobian (q³ = (1 + x²)^{3/2} stays finite in float32;
+#: s'(x) ≈ 5e-37 there, as good as 0)
+_X32_MAX = 1e12
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _sigmoid_one(x):
+    """(s(x), ds/dx) of one value, as :func:`sigmoid` and :func:`sigmoid_derivative`."""
+    a = abs(x)
+    q = math.sqrt(1.0 + a * a)
+    low = 0.5 / (q * (q + a))  # s(-|x|) without cancellation
+    return (low if x < 0.0 else 1.0 - low), 0.5 / (q * q * q)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_SUMS)
+def model_rgb(c0, c1, c2, t_band, B_band, b_uv, b_ir, uv, ir, rgb):
+    """rgb (3,) of the coefficients (c0, c1, c2) under the lumped node model of :func:`fit`
+    (float64): Σ_m B_band[:, m] s(x_m), x_m = (c0 t_m + c1) t_m + c2, plus the lumps
+    b_uv · s(c2) below the band and b_ir · s(c0 + c1 + c2) above it (or the overrides uv,
+    ir where finite). Rest frame of the surface."""
+    r0 = r1 = r2 = 0.0
+    for m in range(t_band.shape[0]):
+        t = t_band[m]
+        s = _sigmoid_one((c0 * t + c1) * t + c2)[0]
+        r0 += B_band[0, m] * s
+        r1 += B_band[1, m] * s
+        r2 += B_band[2, m] * s
+    su = uv if math.isfinite(uv) else _sigmoid_one(c2)[0]
+    si = ir if math.isfinite(ir) else _sigmoid_one(c0 + c1 + c2)[0]
+    rgb[0] = r0 + su * b_uv[0] + si * b_ir[0]
+    rgb[1] = r1 + su * b_uv[1] + si * b_ir[1]
+    rgb[2] = r2 + su * b_uv[2] + si * b_ir[2]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_SUMS)
+def model_jacobian(c0, c1, c2, t32, B32, b_uv, b_ir, uv, ir, J):
+    """J (3, 3) = ∂rgb_i/∂c_j of :func:`model_rgb`, analytic:
+
+        J = Σ_m B_band[:, m] s'(x_m) (t_m², t_m, 1) + b_uv s'(c2) (0, 0, 1)
+            + b_ir s'(c0 + c1 + c2) (1, 1, 1)
+
+    (a lump's term is 0 where it is overridden). The band sum runs in single precision
+    (``t32``, ``B32``: t_band, B_band as float32; relative error ≈ 1e-7, twice the SIMD
+    width): it only steers the steps, the residual that decides is :func:`model_rgb`'s."""
+    f0, f1, f2 = np.float32(c0), np.float32(c1), np.float32(c2)
+    lim = np.float32(_X32_MAX)
+    one, half = np.float32(1.0), np.float32(0.5)
+    j00 = j01 = j02 = j10 = j11 = j12 = j20 = j21 = j22 = np.float32(0.0)
+    for m in range(t32.shape[0]):
+        t = t32[m]
+        x = min(max((f0 * t + f1) * t + f2, -lim), lim)
+        q = np.float32(math.sqrt(one + x * x))
+        d = half / (q * q * q)
+        w0, w1, w2 = B32[0, m] * d, B32[1, m] * d, B32[2, m] * d
+        t2 = t * t
+        j00 += w0 * t2
+        j01 += w0 * t
+        j02 += w0
+        j10 += w1 * t2
+        j11 += w1 * t
+        j12 += w1
+        j20 += w2 * t2
+        j21 += w2 * t
+        j22 += w2
+    du = 0.0 if math.isfinite(uv) else _sigmoid_one(c2)[1]
+    di = 0.0 if math.isfinite(ir) else _sigmoid_one(c0 + c1 + c2)[1]
+    J[0, 0], J[0, 1], J[0, 2] = j00, j01, j02
+    J[1, 0], J[1, 1], J[1, 2] = j10, j11, j12
+    J[2, 0], J[2, 1], J[2, 2] = j20, j21, j22
+    for i in range(3):
+        J[i, 0] += di * b_ir[i]
+        J[i, 1] += di * b_ir[i]
+        J[i, 2] += du * b_uv[i] + di * b_ir[i]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _solve3(A, g, out):
+    """out = A⁻¹ g for a 3×3 matrix (Gaussian elimination with partial pivoting)."""
+    M = np.empty((3, 4))
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = A[i, j]
+        M[i, 3] = g[i]
+    for k in range(3):
+        p = k
+        for i in range(k + 1, 3):
+            if abs(M[i, k]) > abs(M[p, k]):
+                p = i
+        if p != k:
+            for j in range(4):
+                M[k, j], M[p, j] = M[p, j], M[k, j]
+        for i in range(k + 1, 3):
+            f = M[i, k] / M[k, k]
+            for j in range(k, 4):
+                M[i, j] -= f * M[k, j]
+    for i in range(2, -1, -1):
+        v = M[i, 3]
+        for j in range(i + 1, 3):
+            v -= M[i, j] * out[j]
+        out[i] = v / M[i, i]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def fit_one(target, t_band, B_band, t32, B32, b_uv, b_ir, uv, ir, c, tol, max_iter, mu0):
+    """:func:`fit` for one colour, compiled: the same Levenberg–Marquardt steps on
+    ``rgb(c) = target`` (Marquardt scaling, μ ÷3 on success down to 1e-12, ×4 on failure,
+    stalled at μ ≥ 1e12) and the same stop (every RGB residual of :func:`model_rgb`
+    ≤ ``tol``, or ``max_iter`` steps), but μ starts at ``mu0`` (:func:`fit`: 1e-3) and
+    the Jacobian is :func:`model_jacobian`'s (single-precision band sum). From a close
+    start (the coefficient table, :func:`..rgb_table.coefficients`) a tiny μ0 makes the
+    first steps Gauss–Newton's, which converge in one or two steps where μ = 1e-3 takes
+    about six (the 3×3 system is ill-conditioned, so even that damping shortens it).
+
+    ``c`` (3,) is the start and is overwritten with the result; returns the max-abs RGB
+    residual. The Jacobian is evaluated only where a step was accepted and another
+    follows."""
+    rgb = np.empty(3)
+    J = np.empty((3, 3))
+    A = np.empty((3, 3))
+    g = np.empty(3)
+    delta = np.empty(3)
+    r = np.empty(3)
+    model_rgb(c[0], c[1], c[2], t_band, B_band, b_uv, b_ir, uv, ir, rgb)
+    for i in range(3):
+        r[i] = rgb[i] - target[i]
+    cost = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    mu = mu0
+    fresh = False  # is J the Jacobian at c?
+    for _ in range(max_iter):
+        err = max(abs(r[0]), abs(r[1]), abs(r[2]))
+        if not err > tol:
+            return err
+        if not fresh:
+            model_jacobian(c[0], c[1], c[2], t32, B32, b_uv, b_ir, uv, ir, J)
+            fresh = True
+        dmax = 0.0
+        for i in range(3):
+            for j in range(3):
+                A[i, j] = J[0, i] * J[0, j] + J[1, i] * J[1, j] + J[2, i] * J[2, j]
+            g[i] = J[0, i] * r[0] + J[1, i] * r[1] + J[2, i] * r[2]
+            dmax = max(dmax, A[i, i])
+        for i in range(3):
+            A[i, i] += mu * A[i, i] + 1e-300 + 1e-14 * dmax
+        _solve3(A, g, delta)
+        n0, n1, n2 = c[0] - delta[0], c[1] - delta[1], c[2] - delta[2]
+        better = False
+        if math.isfinite(n0) and math.isfinite(n1) and math.isfinite(n2):
+            model_rgb(n0, n1, n2, t_band, B_band, b_uv, b_ir, uv, ir, rgb)
+            e0, e1, e2 = rgb[0] - target[0], rgb[1] - target[1], rgb[2] - target[2]
+            cost_n = e0 * e0 + e1 * e1 + e2 * e2
+            better = cost_n < cost
+        if better:
+            c[0], c[1], c[2] = n0, n1, n2
+            r[0], r[1], r[2] = e0, e1, e2
+            cost = cost_n
+            mu = max(mu / 3.0, 1e-12)
+            fresh = False
+        else:
+            mu = min(mu * 4.0, 1e12)
+            if mu >= 1e12:  # the damping ran away: an unreachable target has stalled
+                break
+    return max(abs(r[0]), abs(r[1]), abs(r[2]))
