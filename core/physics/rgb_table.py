@@ -313,37 +313,33 @@ def _clamped_rows(rgb, out):
 def _first_occurrence(rows, bits, first, inverse):
     """Open-addressing hash of the rows (n, 3) (``bits``: their uint64 view): the distinct
     rows' first indices in ``first`` (returns how many), each row's distinct index in
-    ``inverse``. Equal values have equal bits here (no NaN, no -0.0). A slot holds the
-    64-bit hash and the distinct index side by side (one cache line per probe); rows are
-    compared only when the hashes match."""
+    ``inverse``. Equal values have equal bits here (no NaN, no -0.0). The table holds
+    distinct index + 1 (0: empty) in ≥ 2n uint32 slots (≤ 16 bytes per row)."""
     n = rows.shape[0]
     size = 1
     while size < 2 * n:
         size *= 2
     mask = np.uint64(size - 1)
-    slots = np.zeros((size, 2), np.uint64)  # (hash, distinct index + 1); 0 = empty
+    slots = np.zeros(size, np.uint32)
     count = 0
     for i in range(n):
         h = bits[i, 0] * np.uint64(0x9E3779B97F4A7C15)
         h = (h ^ (h >> np.uint64(29))) + bits[i, 1] * np.uint64(0xBF58476D1CE4E5B9)
         h = (h ^ (h >> np.uint64(31))) + bits[i, 2] * np.uint64(0x94D049BB133111EB)
-        h = h ^ (h >> np.uint64(32))
-        k = h & mask
+        k = (h ^ (h >> np.uint64(32))) & mask
         while True:
-            d = np.int64(slots[k, 1]) - 1
+            d = np.int64(slots[k]) - 1
             if d < 0:
-                slots[k, 0] = h
-                slots[k, 1] = np.uint64(count + 1)
+                slots[k] = np.uint32(count + 1)
                 first[count] = i
                 inverse[i] = count
                 count += 1
                 break
-            if slots[k, 0] == h:
-                j = first[d]
-                if rows[j, 0] == rows[i, 0] and rows[j, 1] == rows[i, 1] \
-                        and rows[j, 2] == rows[i, 2]:
-                    inverse[i] = d
-                    break
+            j = first[d]
+            if rows[j, 0] == rows[i, 0] and rows[j, 1] == rows[i, 1] \
+                    and rows[j, 2] == rows[i, 2]:
+                inverse[i] = d
+                break
             k = (k + np.uint64(1)) & mask
     return count
 
