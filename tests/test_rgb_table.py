@@ -128,3 +128,56 @@ def test_lambda_of_column_inverts_the_grid():
         assert rt.lambda_of_column(float(u)) == pytest.approx(grid[u], rel=1e-9)
     u = (np.log(550.0) - sp.LOG_GRID_MIN) * sp.INV_DLOG
     assert rt.lambda_of_column(u) == pytest.approx(550.0, rel=1e-12)
+
+
+def polish_colours() -> np.ndarray:
+    """Colours for the polish: random ones, near white, saturated ones (a channel near 0
+    or exactly 0) and HDR texels as the environment normalises them (max channel ½)."""
+    rng = np.random.default_rng(11)
+    saturated = rng.random((600, 3)) ** 6
+    saturated[np.arange(200), rng.integers(0, 3, 200)] = 0.0
+    hdr = rng.lognormal(0.0, 1.5, (1200, 3))
+    return np.concatenate([rng.random((1200, 3)), rng.uniform(0.97, 1.0, (500, 3)),
+                           saturated, hdr / (2.0 * hdr.max(axis=1))[:, None]])
+
+
+def test_polish_matches_the_reference_fit(table):
+    """The compiled polish of :func:`coefficients` against the numpy Levenberg–Marquardt
+    fit (:func:`sigmoid.fit`) from the same table start, to the same tolerance: where the
+    reference reaches POLISH_TOL the polish does too (in the fit's forward model, which
+    is the film's to ≈ 1e-6), up to the float32 rounding of the returned coefficients
+    (first-order bound Σ_j |∂rgb/∂c_j| |c_j| 2⁻²⁴, up to 1e-6 for |c| ≈ 1000), and the
+    two colours agree within ΔE00 0.01."""
+    rgb = polish_colours()
+    grey = np.ptp(rgb, axis=1) == 0.0
+    rgb = rgb[~grey]
+    got = rt.coefficients(rgb, table).astype(np.float64)
+    start = np.array([_node(table.scale, table.data, c) for c in rgb])
+    model = sp.reflectance_fit_model()
+    none = np.full(len(rgb), np.nan)
+    ref, ref_resid = sg.fit(rgb, model.t_band, model.B_band, model.b_uv, model.b_ir, none,
+                            none, start, tol=rt.POLISH_TOL, max_iter=rt.POLISH_ITER)
+    basis = np.stack([model.t_band ** 2, model.t_band, np.ones_like(model.t_band)], axis=1)
+    got_rgb, J = sg._model(got, model.t_band, basis, model.B_band, model.b_uv, model.b_ir,
+                           none, none)   # the fit's own forward model (numpy)
+    rounding = np.max(np.abs(J) @ np.abs(got)[:, :, None], axis=(1, 2)) * 2.0 ** -24
+    got_resid = np.abs(got_rgb - rgb).max(axis=1)
+    reached = ref_resid <= rt.POLISH_TOL
+    assert reached.mean() > 0.99   # the comparison covers (nearly) all colours
+    excess = got_resid - (rt.POLISH_TOL + rounding + 1e-12)
+    assert np.all(excess[reached] <= 0.0), (excess.max(), rgb[np.argmax(excess)])
+    de = colour.delta_E(lab(film_rgb(got)), lab(film_rgb(ref)), method="CIE 2000")
+    assert np.max(de) < 0.01, (np.max(de), rgb[np.argmax(de)])
+
+
+def test_distinct_rows_is_unique_of_the_clamped_rows():
+    rng = np.random.default_rng(2)
+    rows = rng.integers(0, 4, (5000, 3)) / 3.0 - 0.2   # many repeats, some out of [0, 1]
+    rows[:7] = [[np.nan, 0.5, 0.5], [0.0, 0.5, 0.5], [-0.0, 0.5, 0.5], [-1.0, 0.5, 0.5],
+                [0.5, 2.0, 0.0], [0.5, 1.0, -0.0], [0.5, 1.0, 0.0]]
+    distinct, inverse = rt.distinct_rows(rows)
+    clamped = np.clip(np.nan_to_num(rows, nan=0.0), 0.0, 1.0)
+    assert np.array_equal(distinct[inverse], clamped)
+    assert len(distinct) == len(np.unique(clamped, axis=0))
+    assert inverse[0] == inverse[1] == inverse[2] == inverse[3] and inverse[4] == inverse[6]
+    assert not np.signbit(distinct).any()
