@@ -358,6 +358,13 @@ def lerp(table, row, i, f):
 # Device functions of the kernel. Those that read arrays are one straight run of code
 # (no branch, no loop): inlined, numba then keeps no reference count on the arrays; a
 # branchy one would cost atomic increments in the loop (measured: +45 % kernel time).
+# numba's inlining copies a function's IR into every call site and types and lowers each
+# copy (shade's compile time grows faster than its size: 3x slower at 2026-11-26's
+# size), so the large ones called from several sites (nee_factors, lights.sample_light)
+# and those only on rarer paths (a moving body's, the environment map's, the textures')
+# are functions of their own, compiled once: with scalar arguments a call costs no
+# reference count, and where arrays are read the path is a rare one (issue 12: cold
+# compile of shade 2.5x faster, Cornell throughput unchanged within the noise).
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def surface_point(v0, e1, e2, ng, tri, b1, b2):
     """Point v0 + b1 e1 + b2 e2 of triangle ``tri`` and its unit geometric normal."""
@@ -452,7 +459,7 @@ def shadow_ray(p, g, eps, target, wi, finite):
     return shadow_ray_from(offset_point(p, g, eps, 1.0), target, wi, finite)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def shadow_ray_from(o, target, wi, finite):
     """:func:`shadow_ray` from the already offset origin ``o``."""
     if finite:
@@ -462,7 +469,7 @@ def shadow_ray_from(o, target, wi, finite):
     return o, wi, 1e30
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def lab_offset(pl, g, eps, side, h, b, ig):
     """The lab event of a point of a moving body offset off its surface: the rest-frame
     displacement y = ε · side · g (S_u) from the lab hit point ``pl`` is the lab
@@ -475,7 +482,7 @@ def lab_offset(pl, g, eps, side, h, b, ig):
     return (pl[0] + yx + c * h[0], pl[1] + yy + c * h[1], pl[2] + yz + c * h[2]), gam * uy
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def lab_normal(n, h, ig):
     """The lab normal of a moving body's surface whose rest-frame unit normal is ``n``
     (velocity direction ``h``, 1/γ = ``ig``): the lab sees the surface contracted by 1/γ
@@ -486,14 +493,14 @@ def lab_normal(n, h, ig):
     return x * inv, y * inv, z * inv
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def lerp_at(table, row, u, top):
     """table[row] linearly interpolated at the column u (clamped to [0, top])."""
     i, f = column(u, top)
     return lerp(table, row, i, f)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def to_rest(p, t, h, b, ig, t_ref, q, org):
     """The lab event (t, p) (accelerator coordinates) in a segment's rest frame, as a
     point of its group's BVH coordinates: Λ(u)'s spatial part of (t - t_ref, p - q),
@@ -504,7 +511,7 @@ def to_rest(p, t, h, b, ig, t_ref, q, org):
     return ex + c * h[0] - org[0], ey + c * h[1] - org[1], ez + c * h[2] - org[2]
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def frame_change(D, shift, beam):
     """The backward path crosses into another frame (physics.md, "Moving objects"):
     radiance there is looked up at λ_next = D · λ and L(λ) = D⁵ L_next(D λ). At a hit on a
@@ -516,7 +523,7 @@ def frame_change(D, shift, beam):
     return (D * D * D * D * D if beam else 1.0), (math.log(D) * INV_DLOG if shift else 0.0)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def pending_shift(lamu, pend):
     """A lane's lab table coordinate when its path left a moving body with D_out =
     ``pend`` whose shift :func:`shade` has not applied yet: ``lamu`` + ln(D_out)·INV_DLOG.
@@ -529,7 +536,7 @@ def pending_shift(lamu, pend):
     return lamu + math.log(pend) * INV_DLOG
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def nee_factors(wo, wi, n, g, p_l, scale, delta, ok, wd, wm, a2):
     """The BSDF and MIS factors of a light sample (:func:`lights.sample_light`'s ``wi``,
     ``p_l``, ``scale``, ``delta``, ``ok``) at a hit with shading normal ``n`` and geometric

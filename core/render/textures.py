@@ -319,7 +319,7 @@ def lab_spread(spread_cam: float, doppler: np.ndarray) -> np.ndarray:
     return (np.asarray(doppler, np.float64) * spread_cam).astype(np.float32)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def bounce_spread(spread, alpha, delta):
     """The cone's spread angle after a bounce (an approximation; Akenine-Möller et al.
     use the surface's curvature, which a flat-triangle mesh does not give): a delta lobe
@@ -332,10 +332,10 @@ def bounce_spread(spread, alpha, delta):
     return spread + min(alpha, DIFFUSE_SPREAD)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def wrap_index(i, n, mode):
     """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2). Selects, no
-    branches (the lookups that inline it read arrays: module note below)."""
+    branches (module note below)."""
     r = i - n * math.floor(i / n)
     k = i - 2 * n * math.floor(i / (2 * n))
     m = min(k, 2 * n - 1 - k)
@@ -343,10 +343,11 @@ def wrap_index(i, n, mode):
     return r if mode == 0 else (c if mode == 1 else m)
 
 
-# The lookups read arrays, so they are inlined and straight-line (selects, no branch or
-# loop), as integrator.py's device functions: numba then keeps no reference counts on the
-# arrays in the kernel's loop (a call, or a branch, costs atomic increments per lookup).
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+# The lookups are straight-line (selects, no branch or loop). They are functions of
+# their own, not inlined into shade (compile time, issue 12: integrator.py's note on its
+# device functions): only textured materials call them, and a call that passes arrays
+# costs a few atomic reference-count updates next to the 8 texel reads of a lookup.
+@njit(cache=True, nogil=True, error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
     nearest texel centres (module docstring)."""
@@ -373,7 +374,7 @@ def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     return c0, c1, c2, c3
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
     """RGBA of texture ``tex`` at (u, v) and the fractional level of detail ``lod``
     (clamped to [0, levels - 1]): linear between the bilinear lookups of the two levels
@@ -389,7 +390,7 @@ def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
             g * a[3] + f * b[3])
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def slot_texel(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
                u, v, lod_geo):
     """The factor-weighted RGBA texel of material m's ``slot`` at the triangle's (u, v)
@@ -409,7 +410,7 @@ def spectral_modes_with_table(mode: str) -> bool:
     return mode in spectrum.MODES and mode != "rgb"
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def channel(t, c):
     """Component ``c`` (0..3) of the RGBA tuple ``t``."""
     if c == 0:
@@ -421,7 +422,7 @@ def channel(t, c):
     return t[3]
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def triangle_uv(tri_uv, tri, b1, b2):
     """The UV at barycentrics (b1, b2) of triangle ``tri`` and its UV edges
     (uv1 - uv0, uv2 - uv0)."""
@@ -431,7 +432,7 @@ def triangle_uv(tri_uv, tri, b1, b2):
     return (u0 + b1 * du1 + b2 * du2, v0 + b1 * dv1 + b2 * dv2), (du1, dv1), (du2, dv2)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def hit_lod(duv1, duv2, area, width, cos_g):
     """The geometric part of the level of detail at a hit (module docstring):
     ½ log2(a_uv / a_w) + log2(width / max(|cos θ|, MIN_COS)); a texture adds
@@ -441,7 +442,7 @@ def hit_lod(duv1, duv2, area, width, cos_g):
         max(width, 1e-30) / max(abs(cos_g), MIN_COS))
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     """The normal of a tangent-space normal map's texel (r, g, b) ∈ [0, 1]³ at a hit
     whose interpolated (or geometric) normal is ``n0`` (on the triangle's front side):
