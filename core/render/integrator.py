@@ -359,12 +359,12 @@ def lerp(table, row, i, f):
 # (no branch, no loop): inlined, numba then keeps no reference count on the arrays; a
 # branchy one would cost atomic increments in the loop (measured: +45 % kernel time).
 # numba's inlining copies a function's IR into every call site and types and lowers each
-# copy (shade's compile time grows faster than its size: 3x slower at 2026-11-26's
-# size), so the large ones called from several sites (nee_factors, lights.sample_light)
-# and those only on rarer paths (a moving body's, the environment map's, the textures')
-# are functions of their own, compiled once: with scalar arguments a call costs no
-# reference count, and where arrays are read the path is a rare one (issue 12: cold
-# compile of shade 2.5x faster, Cornell throughput unchanged within the noise).
+# copy, and shade's compile time grows faster than its size, so the device functions of
+# rarer paths (a moving body's frame changes and offsets, the environment map's lookups
+# and sampling, the textures' lookups: :mod:`.textures`' note) are functions of their
+# own, compiled once (issue 12: Cornell's cold compile 114 -> ~60 CPU s, its images
+# bit-identical). Those of every hit stay inlined: compiled apart, nee_factors and
+# lights.sample_light cost 8 % of Cornell's throughput (alternated runs, medians of 5).
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def surface_point(v0, e1, e2, ng, tri, b1, b2):
     """Point v0 + b1 e1 + b2 e2 of triangle ``tri`` and its unit geometric normal."""
@@ -536,7 +536,7 @@ def pending_shift(lamu, pend):
     return lamu + math.log(pend) * INV_DLOG
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def nee_factors(wo, wi, n, g, p_l, scale, delta, ok, wd, wm, a2):
     """The BSDF and MIS factors of a light sample (:func:`lights.sample_light`'s ``wi``,
     ``p_l``, ``scale``, ``delta``, ``ok``) at a hit with shading normal ``n`` and geometric
@@ -653,14 +653,18 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     q_e = env_bilinear(s_env_tex, s_env_rot, dx, dy, dz)
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * env_lane_bilinear(
-                            s_env_tex, q_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
+                            s_env_tex, q_e, j, rgb_lanes, np.float64(lamu[pi, j]),
+                            np.float64(lerp(s_emit, s_env_row, li[pi, j], lf[pi, j])),
+                            s_env_nm)
                 else:
+                    # (float64 arguments, exactly the float32 values, as next-event
+                    # estimation passes: one compiled env_lane for both)
                     r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * w * env_lane(
-                            s_env_tex, r_e, c_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
+                            s_env_tex, r_e, c_e, j, rgb_lanes, np.float64(lamu[pi, j]),
+                            np.float64(lerp(s_emit, s_env_row, li[pi, j], lf[pi, j])),
+                            s_env_nm)
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
@@ -710,29 +714,30 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
             lod = hit_lod(duv1, duv2, s_area[tri], cone_w, cos_g)
             if t_mat_tex[m, BASE] >= 0:
+                # (the slots as int64, not as literals: one compiled slot_texel for all)
                 tr_, tg_, tb_, _ = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                              t_mat_factor, t_mat_lod, m, BASE, uv[0], uv[1],
-                                              lod)
+                                              t_mat_factor, t_mat_lod, m, np.int64(BASE), uv[0],
+                                              uv[1], lod)
                 tex_base = True
                 alb[0] = min(max(tr_, 0.0), 1.0)
                 alb[1] = min(max(tg_, 0.0), 1.0)
                 alb[2] = min(max(tb_, 0.0), 1.0)
             if t_mat_tex[m, ROUGHNESS] >= 0:
                 r_ = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                        t_mat_factor, t_mat_lod, m, ROUGHNESS, uv[0], uv[1],
-                                        lod), t_mat_ch[m, ROUGHNESS])
+                                        t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS),
+                                        uv[0], uv[1], lod), t_mat_ch[m, ROUGHNESS])
                 r_ = min(max(r_, 0.0), 1.0)
                 a = max(r_ * r_, 1e-4)
             if t_mat_tex[m, METALLIC] >= 0:
                 mt = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                        t_mat_factor, t_mat_lod, m, METALLIC, uv[0], uv[1],
-                                        lod), t_mat_ch[m, METALLIC])
+                                        t_mat_factor, t_mat_lod, m, np.int64(METALLIC),
+                                        uv[0], uv[1], lod), t_mat_ch[m, METALLIC])
                 mt = min(max(mt, 0.0), 1.0)
                 tt = t_trans[m]
                 wd, wm, wg = (1.0 - mt) * (1.0 - tt), mt, (1.0 - mt) * tt
             if t_mat_tex[m, NORMAL] >= 0:
                 nt = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                                t_mat_lod, m, NORMAL, uv[0], uv[1], lod)
+                                t_mat_lod, m, np.int64(NORMAL), uv[0], uv[1], lod)
                 n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
                 if s_has_vn:
                     n0 = vertex_normal(s_vn, tri, b1, b2)
@@ -744,8 +749,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 # BSDF sampling only (the material is no light of next-event estimation:
                 # its emit row is -1), so with MIS weight 1
                 er_, eg_, eb_, _ = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                              t_mat_factor, t_mat_lod, m, EMISSION, uv[0],
-                                              uv[1], lod)
+                                              t_mat_factor, t_mat_lod, m, np.int64(EMISSION),
+                                              uv[0], uv[1], lod)
                 est = t_estr[m]
                 if t_rgb:
                     L[pi, 0] += thr[pi, 0] * est * max(er_, 0.0)

@@ -221,7 +221,7 @@ def light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot, v0, e1, e2, n
             mat_one_sided[tri_mat[lt]])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def sample_light(light, p_sel, u1, u2, px, py, pz, eps):
     """Next-event estimation from the point x = (px, py, pz) (accelerator coordinates)
     towards ``light`` (:func:`light_record`), picked with probability ``p_sel``, as the

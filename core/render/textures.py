@@ -332,7 +332,7 @@ def bounce_spread(spread, alpha, delta):
     return spread + min(alpha, DIFFUSE_SPREAD)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def wrap_index(i, n, mode):
     """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2). Selects, no
     branches (module note below)."""
@@ -343,11 +343,14 @@ def wrap_index(i, n, mode):
     return r if mode == 0 else (c if mode == 1 else m)
 
 
-# The lookups are straight-line (selects, no branch or loop). They are functions of
-# their own, not inlined into shade (compile time, issue 12: integrator.py's note on its
-# device functions): only textured materials call them, and a call that passes arrays
-# costs a few atomic reference-count updates next to the 8 texel reads of a lookup.
-@njit(cache=True, nogil=True, error_model="numpy")
+# The lookups read arrays, so they are inlined and straight-line (selects, no branch or
+# loop), as integrator.py's device functions: numba then keeps no reference counts on the
+# arrays (a call, or a branch, costs atomic increments per lookup). They are inlined into
+# slot_texel, which shade calls without inlining it (its five call sites made up a third
+# of shade's compile time, issue 12); slot_texel runs without numba's reference counting
+# (``_nrt=False``: it allocates nothing and only reads the arrays its caller holds), so
+# the call passes the arrays without atomic reference-count updates.
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
     nearest texel centres (module docstring)."""
@@ -374,7 +377,7 @@ def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     return c0, c1, c2, c3
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
     """RGBA of texture ``tex`` at (u, v) and the fractional level of detail ``lod``
     (clamped to [0, levels - 1]): linear between the bilinear lookups of the two levels
@@ -390,7 +393,7 @@ def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
             g * a[3] + f * b[3])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def slot_texel(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
                u, v, lod_geo):
     """The factor-weighted RGBA texel of material m's ``slot`` at the triangle's (u, v)
