@@ -1256,6 +1256,36 @@ def _section_first(add, d) -> None:
                                    ("of it: imports (s)", "import_s", ".2f"),
                                    ("load", "load", ".1f")]))
         add("")
+        add(FIRST_CLI_NOTES)
+
+
+#: What the 2026-11-26 investigation of issue 12 found (not from the CSVs: its figures
+#: were measured by hand, named below).
+FIRST_CLI_NOTES = (
+    "*Cold compile* (measured apart, 2026-11-26, per kernel with numba's compile events): "
+    "all but about 15 s of the cold run is `integrator.shade`, compiled once (static and "
+    "moving scenes share its one type signature, so `python -m relray.core.warmup` "
+    "compiles it once too). numba's own passes, not LLVM, took the time: inlining 38 s, "
+    "SSA reconstruction 34 s, lowering 24 s, type inference 16 s, rewrites 14 s, LLVM "
+    "14 s (wall, load 3): an `inline=\"always\"` device function is copied, typed and "
+    "lowered at every call site, and the five texture-slot lookups, the environment "
+    "map's and the moving bodies' helpers had made shade several times larger. Compiled "
+    "once as functions of their own (the helpers every hit runs stay inlined), the cold "
+    "command line takes 65 CPU s at load 2 (72 at load 3.5; it was 122 at load 3), its "
+    "images bit-identical (Cornell; a moving, textured, environment-lit scene); "
+    "`python -m relray.core.warmup` 73 CPU s (126 before, both at load 4); throughput "
+    "unchanged: Cornell 0.670 against 0.673 M paths/CPU-s (`bench/throughput.py`, 16 spp, "
+    "1 thread, medians of 5 alternated runs), the textured box of `bench/textures.py` "
+    "0.327 against 0.302. "
+    "Compiling `nee_factors` and `lights.sample_light` apart as well gives 48 CPU s but "
+    "costs 8 % of Cornell's throughput (medians of 5 alternated runs), so they stay "
+    "inlined: the 45 s goal is not met.\n\n"
+    "*Warm*: with the kernels cached, numba alone takes about 1 s before relray does any "
+    "work (load 1.3, cProfile): importing numba (0.45 s with numpy) and, at the first "
+    "cached kernel, numba's typing and lowering registries (0.45-0.57 s, 0.14 s of it "
+    "`scipy.linalg`, imported by numba's BLAS check); relray's own share is the job "
+    "schema (pydantic, 0.18 s), its modules, a 0.19 s render and 0.10 s of writing. "
+    "The 1 s goal is not reachable while the command line loads numba's JIT.\n")
 
 
 def _section_environment(add, d) -> None:

@@ -229,7 +229,7 @@ def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> K
 # ------------------------------------------------------------------ device functions
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def direction_to_uv(x, y, z, rot):
     """Map coordinates (u, v) ∈ [0, 1)² × [0, 1] of the unit lab direction (x, y, z)."""
     cz = min(max(np.float64(z), -1.0), 1.0)
@@ -238,7 +238,7 @@ def direction_to_uv(x, y, z, rot):
     return u - math.floor(u), v
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def uv_to_direction(u, v, rot):
     """The unit lab direction of map coordinates (u, v) and its sin θ."""
     theta = math.pi * (1.0 - v)
@@ -247,7 +247,7 @@ def uv_to_direction(u, v, rot):
     return (st * math.cos(phi), st * math.sin(phi), math.cos(theta)), st
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_texel(tex, rot, x, y, z):
     """(row, column) of the texel the lab direction (x, y, z) sees."""
     h, w = tex.shape[0], tex.shape[1]
@@ -255,7 +255,7 @@ def env_texel(tex, rot, x, y, z):
     return min(int(v * h), h - 1), min(int(u * w), w - 1)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_bilinear(tex, rot, x, y, z):
     """The 2 × 2 texels around the lab direction (x, y, z) and its weights, for the
     bilinear lookup of the map seen directly (texel centres at ((c + ½)/W, (r + ½)/H);
@@ -271,7 +271,7 @@ def env_bilinear(tex, rot, x, y, z):
     return r0, min(r0 + 1, h - 1), c0 % w, (c0 + 1) % w, ry - r0, fx
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_lane_bilinear(tex, q, j, rgb, lamu, base, nm):
     """:func:`env_lane` interpolated over the texels ``q`` of :func:`env_bilinear`."""
     r0, r1, c0, c1, fy, fx = q
@@ -282,7 +282,7 @@ def env_lane_bilinear(tex, q, j, rgb, lamu, base, nm):
     return (1.0 - fy) * a + fy * b
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_lane(tex, r, c, j, rgb, lamu, base, nm):
     """The radiance of texel (r, c) for lane j: rgb mode its channel j, a spectral map
     (``nm`` not empty) its bands interpolated at the lane's lab wavelength λ (table
@@ -297,7 +297,7 @@ def env_lane(tex, r, c, j, rgb, lamu, base, nm):
                                   lambda_of_column(lamu)))
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def band_value(tex, r, c, nm, lam):
     """Texel (r, c)'s spectral radiance at λ (nm): its bands at ``nm`` interpolated
     linearly, 0 outside [nm[0], nm[-1]] (module docstring)."""
@@ -309,7 +309,7 @@ def band_value(tex, r, c, nm, lam):
     return (1.0 - f) * np.float64(tex[r, c, k - 1]) + f * np.float64(tex[r, c, k])
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_pdf(pmf, rot, x, y, z):
     """Solid-angle density of :func:`env_sample` at the lab direction (x, y, z):
     p_t H W / (2π² sin θ) (0 at the poles)."""
@@ -322,7 +322,7 @@ def env_pdf(pmf, rot, x, y, z):
         TWO_PI_SQ * st)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def _pick(cdf, u):
     """(k, fraction) with cdf[k] <= u < cdf[k + 1] and u's place inside it."""
     n = len(cdf) - 1
@@ -332,7 +332,7 @@ def _pick(cdf, u):
     return k, min(max(f, 0.0), 1.0 - 1e-7)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_sample(marg, cond, pmf, rot, u1, u2):
     """A lab direction drawn ∝ texel power (module docstring) and its solid-angle pdf
     (0 when it fell on a pole: then refuse the sample)."""
@@ -346,7 +346,7 @@ def env_sample(marg, cond, pmf, rot, u1, u2):
     return wi, pdf
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_light_sample(marg, cond, pmf, rot, p_sel, u1, u2):
     """Next-event estimation towards the map, picked with probability ``p_sel``: the
     tuple of :func:`.lights.sample_light` (wi, p_sel · pdf, scale 1, not delta, at

@@ -359,6 +359,13 @@ def lerp(table, row, i, f):
 # Device functions of the kernel. Those that read arrays are one straight run of code
 # (no branch, no loop): inlined, numba then keeps no reference count on the arrays; a
 # branchy one would cost atomic increments in the loop (measured: +45 % kernel time).
+# numba's inlining copies a function's IR into every call site and types and lowers each
+# copy, and shade's compile time grows faster than its size, so the device functions of
+# rarer paths (a moving body's frame changes and offsets, the environment map's lookups
+# and sampling, the textures' lookups: :mod:`.textures`' note) are functions of their
+# own, compiled once (issue 12: Cornell's cold compile 114 -> ~60 CPU s, its images
+# bit-identical). Those of every hit stay inlined: compiled apart, nee_factors and
+# lights.sample_light cost 8 % of Cornell's throughput (alternated runs, medians of 5).
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def surface_point(v0, e1, e2, ng, tri, b1, b2):
     """Point v0 + b1 e1 + b2 e2 of triangle ``tri`` and its unit geometric normal."""
@@ -453,7 +460,7 @@ def shadow_ray(p, g, eps, target, wi, finite):
     return shadow_ray_from(offset_point(p, g, eps, 1.0), target, wi, finite)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def shadow_ray_from(o, target, wi, finite):
     """:func:`shadow_ray` from the already offset origin ``o``."""
     if finite:
@@ -463,7 +470,7 @@ def shadow_ray_from(o, target, wi, finite):
     return o, wi, 1e30
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def lab_offset(pl, g, eps, side, h, b, ig):
     """The lab event of a point of a moving body offset off its surface: the rest-frame
     displacement y = ε · side · g (S_u) from the lab hit point ``pl`` is the lab
@@ -476,7 +483,7 @@ def lab_offset(pl, g, eps, side, h, b, ig):
     return (pl[0] + yx + c * h[0], pl[1] + yy + c * h[1], pl[2] + yz + c * h[2]), gam * uy
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def lab_normal(n, h, ig):
     """The lab normal of a moving body's surface whose rest-frame unit normal is ``n``
     (velocity direction ``h``, 1/γ = ``ig``): the lab sees the surface contracted by 1/γ
@@ -487,14 +494,14 @@ def lab_normal(n, h, ig):
     return x * inv, y * inv, z * inv
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def lerp_at(table, row, u, top):
     """table[row] linearly interpolated at the column u (clamped to [0, top])."""
     i, f = column(u, top)
     return lerp(table, row, i, f)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def to_rest(p, t, h, b, ig, t_ref, q, org):
     """The lab event (t, p) (accelerator coordinates) in a segment's rest frame, as a
     point of its group's BVH coordinates: Λ(u)'s spatial part of (t - t_ref, p - q),
@@ -505,7 +512,7 @@ def to_rest(p, t, h, b, ig, t_ref, q, org):
     return ex + c * h[0] - org[0], ey + c * h[1] - org[1], ez + c * h[2] - org[2]
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def frame_change(D, shift, beam):
     """The backward path crosses into another frame (physics.md, "Moving objects"):
     radiance there is looked up at λ_next = D · λ and L(λ) = D⁵ L_next(D λ). At a hit on a
@@ -517,7 +524,7 @@ def frame_change(D, shift, beam):
     return (D * D * D * D * D if beam else 1.0), (math.log(D) * INV_DLOG if shift else 0.0)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def pending_shift(lamu, pend):
     """A lane's lab table coordinate when its path left a moving body with D_out =
     ``pend`` whose shift :func:`shade` has not applied yet: ``lamu`` + ln(D_out)·INV_DLOG.
@@ -669,14 +676,18 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     q_e = env_bilinear(s_env_tex, s_env_rot, dx, dy, dz)
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * env_lane_bilinear(
-                            s_env_tex, q_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
+                            s_env_tex, q_e, j, rgb_lanes, np.float64(lamu[pi, j]),
+                            np.float64(lerp(s_emit, s_env_row, li[pi, j], lf[pi, j])),
+                            s_env_nm)
                 else:
+                    # (float64 arguments, exactly the float32 values, as next-event
+                    # estimation passes: one compiled env_lane for both)
                     r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
                     for j in range(nlanes):
                         L[pi, j] += thr[pi, j] * w * env_lane(
-                            s_env_tex, r_e, c_e, j, rgb_lanes, lamu[pi, j],
-                            lerp(s_emit, s_env_row, li[pi, j], lf[pi, j]), s_env_nm)
+                            s_env_tex, r_e, c_e, j, rgb_lanes, np.float64(lamu[pi, j]),
+                            np.float64(lerp(s_emit, s_env_row, li[pi, j], lf[pi, j])),
+                            s_env_nm)
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
@@ -726,29 +737,30 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
             lod = hit_lod(duv1, duv2, s_area[tri], cone_w, cos_g)
             if t_mat_tex[m, BASE] >= 0:
+                # (the slots as int64, not as literals: one compiled slot_texel for all)
                 tr_, tg_, tb_, _ = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                              t_mat_factor, t_mat_lod, m, BASE, uv[0], uv[1],
-                                              lod)
+                                              t_mat_factor, t_mat_lod, m, np.int64(BASE), uv[0],
+                                              uv[1], lod)
                 tex_base = True
                 alb[0] = min(max(tr_, 0.0), 1.0)
                 alb[1] = min(max(tg_, 0.0), 1.0)
                 alb[2] = min(max(tb_, 0.0), 1.0)
             if t_mat_tex[m, ROUGHNESS] >= 0:
                 r_ = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                        t_mat_factor, t_mat_lod, m, ROUGHNESS, uv[0], uv[1],
-                                        lod), t_mat_ch[m, ROUGHNESS])
+                                        t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS),
+                                        uv[0], uv[1], lod), t_mat_ch[m, ROUGHNESS])
                 r_ = min(max(r_, 0.0), 1.0)
                 a = max(r_ * r_, 1e-4)
             if t_mat_tex[m, METALLIC] >= 0:
                 mt = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                        t_mat_factor, t_mat_lod, m, METALLIC, uv[0], uv[1],
-                                        lod), t_mat_ch[m, METALLIC])
+                                        t_mat_factor, t_mat_lod, m, np.int64(METALLIC),
+                                        uv[0], uv[1], lod), t_mat_ch[m, METALLIC])
                 mt = min(max(mt, 0.0), 1.0)
                 tt = t_trans[m]
                 wd, wm, wg = (1.0 - mt) * (1.0 - tt), mt, (1.0 - mt) * tt
             if t_mat_tex[m, NORMAL] >= 0:
                 nt = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                                t_mat_lod, m, NORMAL, uv[0], uv[1], lod)
+                                t_mat_lod, m, np.int64(NORMAL), uv[0], uv[1], lod)
                 n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
                 if s_has_vn:
                     n0 = vertex_normal(s_vn, tri, b1, b2)
@@ -760,8 +772,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 # BSDF sampling only (the material is no light of next-event estimation:
                 # its emit row is -1), so with MIS weight 1
                 er_, eg_, eb_, _ = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                              t_mat_factor, t_mat_lod, m, EMISSION, uv[0],
-                                              uv[1], lod)
+                                              t_mat_factor, t_mat_lod, m, np.int64(EMISSION),
+                                              uv[0], uv[1], lod)
                 est = t_estr[m]
                 if t_rgb:
                     L[pi, 0] += thr[pi, 0] * est * max(er_, 0.0)

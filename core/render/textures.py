@@ -319,7 +319,7 @@ def lab_spread(spread_cam: float, doppler: np.ndarray) -> np.ndarray:
     return (np.asarray(doppler, np.float64) * spread_cam).astype(np.float32)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def bounce_spread(spread, alpha, delta):
     """The cone's spread angle after a bounce (an approximation; Akenine-Möller et al.
     use the surface's curvature, which a flat-triangle mesh does not give): a delta lobe
@@ -335,7 +335,7 @@ def bounce_spread(spread, alpha, delta):
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def wrap_index(i, n, mode):
     """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2). Selects, no
-    branches (the lookups that inline it read arrays: module note below)."""
+    branches (module note below)."""
     r = i - n * math.floor(i / n)
     k = i - 2 * n * math.floor(i / (2 * n))
     m = min(k, 2 * n - 1 - k)
@@ -345,7 +345,11 @@ def wrap_index(i, n, mode):
 
 # The lookups read arrays, so they are inlined and straight-line (selects, no branch or
 # loop), as integrator.py's device functions: numba then keeps no reference counts on the
-# arrays in the kernel's loop (a call, or a branch, costs atomic increments per lookup).
+# arrays (a call, or a branch, costs atomic increments per lookup). They are inlined into
+# slot_texel, which shade calls without inlining it (its five call sites made up a third
+# of shade's compile time, issue 12); slot_texel runs without numba's reference counting
+# (``_nrt=False``: it allocates nothing and only reads the arrays its caller holds), so
+# the call passes the arrays without atomic reference-count updates.
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
@@ -389,7 +393,7 @@ def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
             g * a[3] + f * b[3])
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def slot_texel(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
                u, v, lod_geo):
     """The factor-weighted RGBA texel of material m's ``slot`` at the triangle's (u, v)
@@ -409,7 +413,7 @@ def spectral_modes_with_table(mode: str) -> bool:
     return mode in spectrum.MODES and mode != "rgb"
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def channel(t, c):
     """Component ``c`` (0..3) of the RGBA tuple ``t``."""
     if c == 0:
@@ -421,7 +425,7 @@ def channel(t, c):
     return t[3]
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def triangle_uv(tri_uv, tri, b1, b2):
     """The UV at barycentrics (b1, b2) of triangle ``tri`` and its UV edges
     (uv1 - uv0, uv2 - uv0)."""
@@ -431,7 +435,7 @@ def triangle_uv(tri_uv, tri, b1, b2):
     return (u0 + b1 * du1 + b2 * du2, v0 + b1 * dv1 + b2 * dv2), (du1, dv1), (du2, dv2)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def hit_lod(duv1, duv2, area, width, cos_g):
     """The geometric part of the level of detail at a hit (module docstring):
     ½ log2(a_uv / a_w) + log2(width / max(|cos θ|, MIN_COS)); a texture adds
@@ -441,7 +445,7 @@ def hit_lod(duv1, duv2, area, width, cos_g):
         max(width, 1e-30) / max(abs(cos_g), MIN_COS))
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy")
 def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     """The normal of a tangent-space normal map's texel (r, g, b) ∈ [0, 1]³ at a hit
     whose interpolated (or geometric) normal is ``n0`` (on the triangle's front side):
