@@ -110,7 +110,7 @@ from .lights import (
     triangle_light_pdf,
 )
 from .materials import SpectralTables
-from .rest_frames import MovingScene
+from .rest_frames import MovingScene, blocked_ray, static_query_args
 from .sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -558,16 +558,26 @@ def nee_factors(wo, wi, n, g, p_l, scale, delta, ok, wd, wm, a2):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def shadow_done(static, f, w, addr, now, shadows, k, L, pi, nlanes):
+def shadow_done(static, box_lo, box_hi, segs, f, w, addr, now, shadows, k, L, pi, nlanes):
     """The shadow ray just written to slot ``k`` of ``shadows``: kept for a later trace
-    (returns k + 1), or, when ``now``, traced at once in the static scene ``static``
-    (:func:`.embree.occluded1`, from the values as stored, float32) and its contribution
-    added to path ``pi``'s ``L`` when unblocked (returns k: the slot is reused)."""
+    (returns k + 1), or, when ``now``, traced at once (from the values as stored,
+    float32) and its contribution added to path ``pi``'s ``L`` when unblocked (returns k:
+    the slot is reused). A static scene (no segment in ``segs``) asks Embree directly
+    (:func:`.embree.occluded1` on ``static``); a moving one through
+    :func:`.rest_frames.blocked_ray` (the static BVH, then every segment's rest-frame ray,
+    at the ray's origin time)."""
     if not now:
         return k + 1
-    _, sh_o, sh_d, sh_t, sh_c, _ = shadows
-    if not occluded1(static, f, w, addr, sh_o[k, 0], sh_o[k, 1], sh_o[k, 2], sh_d[k, 0],
-                     sh_d[k, 1], sh_d[k, 2], sh_t[k]):
+    _, sh_o, sh_d, sh_t, sh_c, sh_t0 = shadows
+    if segs.handle.shape[0] == 0:
+        blocked = static != 0 and occluded1(static, f, w, addr, sh_o[k, 0], sh_o[k, 1],
+                                            sh_o[k, 2], sh_d[k, 0], sh_d[k, 1], sh_d[k, 2],
+                                            sh_t[k])
+    else:
+        blocked = blocked_ray(static, box_lo, box_hi, segs, f, w, addr, sh_o[k, 0],
+                              sh_o[k, 1], sh_o[k, 2], sh_d[k, 0], sh_d[k, 1], sh_d[k, 2],
+                              sh_t[k], sh_t0[k])
+    if not blocked:
         for j in range(nlanes):
             L[pi, j] += sh_c[k, j]
     return k
@@ -575,7 +585,7 @@ def shadow_done(static, f, w, addr, now, shadows, k, L, pi, nlanes):
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
 def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen, feats,
-          want_feats, static_scene, trace_shadows):
+          want_feats, tracer, trace_shadows):
     """One bounce for the live rays 0 ≤ i < n of ``rays`` (:class:`Rays`; ray i belongs to
     path ``rays.idx[i]`` of ``paths``, :class:`Paths`) and their ``hits``
     (:class:`accel.Hits`): hit → emission → next-event estimation → continuation →
@@ -584,10 +594,11 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     Adds emission seen by the ray (MIS-weighted against NEE), prepares one shadow ray
     (NEE) and samples the continuation.  The continuing rays are compacted *in place*
     into the front of ``rays`` (ray i is read before slot ≤ i is written), the shadow
-    rays into the front of ``shadows`` (:class:`ShadowRays`), unless ``trace_shadows``
-    (a static scene): then each shadow ray is traced at once in the Embree scene
-    ``static_scene`` (:func:`.embree.occluded1`) and its contribution added if nothing
-    blocks it (the same sum, in the same order, as :func:`add_shadows` after the kernel).  Returns
+    rays into the front of ``shadows`` (:class:`ShadowRays`), unless ``trace_shadows``:
+    then each shadow ray is traced at once in ``tracer`` (static scene handle, its box,
+    the :class:`.rest_frames.SegmentTable`: :meth:`.rest_frames.MovingScene.query_args`,
+    :func:`shadow_done`) and its contribution added if nothing blocks it (the same sum,
+    in the same order, as :func:`add_shadows` after the kernel).  Returns
     (continuing rays, shadow rays left to trace, shadow rays made).  ``sky_seen = False``
     (a transparent film) hides the sky from camera rays (depth 0) only; ``nlanes`` is 4
     (hero wavelengths) or 3 (rgb).  With ``want_feats`` the paths' denoising features
@@ -631,6 +642,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     idx, o, d, rt = rays
     t_hit, prim, bu, bv, hseg = hits
     sh_idx, sh_o, sh_d, sh_t, sh_c, sh_t0 = shadows
+    tr_static, tr_lo, tr_hi, tr_segs = tracer
     rh_f, rh_w, rh_addr = rayhit_buffer()
     top = s_emit.shape[1] - 1
     dim_light = bounce_dim(depth, DIM_LIGHT)
@@ -908,8 +920,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = so[0], so[1], so[2]
                 sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]
                 sh_t[n_sh] = st
-                n_sh = shadow_done(static_scene, rh_f, rh_w, rh_addr, trace_shadows,
-                                   shadows, n_sh, L, pi, nlanes)
+                n_sh = shadow_done(tr_static, tr_lo, tr_hi, tr_segs, rh_f, rh_w, rh_addr,
+                                   trace_shadows, shadows, n_sh, L, pi, nlanes)
                 n_nee += 1
             elif ok:
                 row = s_l_row[k]
@@ -947,8 +959,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = so[0], so[1], so[2]
                 sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]
                 sh_t[n_sh] = st
-                n_sh = shadow_done(static_scene, rh_f, rh_w, rh_addr, trace_shadows,
-                                   shadows, n_sh, L, pi, nlanes)
+                n_sh = shadow_done(tr_static, tr_lo, tr_hi, tr_segs, rh_f, rh_w, rh_addr,
+                                   trace_shadows, shadows, n_sh, L, pi, nlanes)
                 n_nee += 1
         # ---- the continuation
         u1, u2 = sobol2(key, dim_bsdf)
@@ -1239,11 +1251,10 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
         feats.albedo[:] = 0.0
         feats.normal[:] = 0.0
     moving = isinstance(accel, MovingScene)
-    # shade traces the shadow rays of a static scene itself (not through the holes of
-    # alpha masks, which need nearest-hit queries; a moving scene's go through its
-    # rest-frame loop, :meth:`.rest_frames.MovingScene.occluded`)
-    in_kernel = not moving and not sc.tex.cutouts
-    static_scene = accel.handle if in_kernel else np.uint64(0)
+    # shade traces the shadow rays itself (not through the holes of alpha masks, which
+    # need nearest-hit queries)
+    in_kernel = not sc.tex.cutouts
+    tracer = accel.query_args() if moving else static_query_args(accel)
     area_lights = len(sc.area_tris) > 0  # else not one more instruction per ray
     static_seg = b["seg"]
     if not moving:
@@ -1262,7 +1273,7 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
         if area_lights:
             cross_area_lights(sc, paths, rays, hits, m, depth, nlanes)
         m, ns, _ = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes,
-                         sky_seen, feats, features, static_scene, in_kernel)
+                         sky_seen, feats, features, tracer, in_kernel)
         if ns:
             if sc.tex.cutouts:  # shadows through the holes too
                 blocked = occluded_through(sc, accel, shadows.o[:ns], shadows.d[:ns],

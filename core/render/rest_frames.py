@@ -194,6 +194,17 @@ def blocked1(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tma
     return False
 
 
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, _nrt=False)
+def blocked_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tmax,
+                t):  # pragma: no cover - compiled
+    """:func:`blocked1` compiled as a function of its own, for the shade kernel to call per
+    shadow ray: with its own fast-math flags (the kernel's reassociation never reaches
+    the rest-frame arithmetic) and without reference counting (``_nrt=False``: it
+    allocates nothing and only reads its caller's arrays), so a call costs no atomic
+    operation per array argument."""
+    return blocked1(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tmax, t)
+
+
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
 def moving_blocked(static, box_lo, box_hi, st, o, d, tmax, t, blocked):
     """:func:`blocked1` of each lab segment (origins ``o``, directions ``d``, lengths
@@ -265,6 +276,11 @@ class MovingScene:
         its group's BVH in rest-frame coordinates (S, 3)."""
         st = self.segments
         return st.h, st.b, st.ig, st.t_ref, st.q, st.centre
+
+
+def static_query_args(static: Accel) -> tuple:
+    """:meth:`MovingScene.query_args` of a static scene: its handle and box, no segment."""
+    return static.handle, static.box_lo, static.box_hi, _segments([], static.origin)
 
 
 def _segments(groups: list[GroupAccel], lab_origin: np.ndarray) -> SegmentTable:
