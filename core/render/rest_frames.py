@@ -76,37 +76,40 @@ _FAST = {"contract"}
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
-def rest_ray(ox, oy, oz, dx, dy, dz, t, best, st, s):  # pragma: no cover - compiled
+def rest_ray(ox, oy, oz, dx, dy, dz, t, best, h, b, ig, t_ref, q, t_lo, t_hi, centre,
+             radius, s):  # pragma: no cover - compiled
     """The lab ray (accelerator-local origin o, unit d, origin lab time t) as a ray of
-    segment ``s`` of ``st`` (u = b h, 1/γ = ig, frame origin event (t_ref, q), emission
-    window [t_lo, t_hi)), for its part before ``best`` (the nearest lab hit so far) and
-    inside the window (module docstring). Returns (kept, start (BVH coordinates),
+    segment ``s`` of a :class:`SegmentTable`, given as its arrays (u = b h, 1/γ = ig,
+    frame origin event (t_ref, q), emission window [t_lo, t_hi), bounding sphere
+    (centre, radius); arrays, not the table, so a loop reads no tuple field), for its
+    part before ``best`` (the nearest lab hit so far) and inside the window (module
+    docstring). Returns (kept, start (BVH coordinates),
     d_u, k = s_u/s_lab, lab start s_lo, rest-frame length); not kept when the part is
     empty or cannot reach the group's bounding sphere."""
-    lo = max(0.0, t - st.t_hi[s])
-    hi = min(np.float64(best), t - st.t_lo[s])
+    lo = max(0.0, t - t_hi[s])
+    hi = min(np.float64(best), t - t_lo[s])
     if hi <= lo:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0
-    hx, hy, hz, b, ig = st.h[s, 0], st.h[s, 1], st.h[s, 2], st.b[s], st.ig[s]
-    g = 1.0 / ig
+    hx, hy, hz, bs, igs = h[s, 0], h[s, 1], h[s, 2], b[s], ig[s]
+    g = 1.0 / igs
     c = g * g / (g + 1.0)
-    ux, uy, uz = b * hx, b * hy, b * hz
-    dux, duy, duz, _ = aberrate_doppler_ray(dx, dy, dz, -hx, -hy, -hz, b, ig)
+    ux, uy, uz = bs * hx, bs * hy, bs * hz
+    dux, duy, duz, _ = aberrate_doppler_ray(dx, dy, dz, -hx, -hy, -hz, bs, igs)
     # k = 1/D_u = γ (1 + u·d), in aberrate_doppler_ray's cancellation-free form
     cx, cy, cz = dx + hx, dy + hy, dz + hz
-    kk = g * ((1.0 - b) + 0.5 * b * (cx * cx + cy * cy + cz * cz))
-    dt = t - st.t_ref[s]
-    ex, ey, ez = ox - st.q[s, 0], oy - st.q[s, 1], oz - st.q[s, 2]
+    kk = g * ((1.0 - bs) + 0.5 * bs * (cx * cx + cy * cy + cz * cz))
+    dt = t - t_ref[s]
+    ex, ey, ez = ox - q[s, 0], oy - q[s, 1], oz - q[s, 2]
     ue = c * (ux * ex + uy * ey + uz * ez) - g * dt
-    sx = ex + ue * ux + kk * lo * dux - st.centre[s, 0]
-    sy = ey + ue * uy + kk * lo * duy - st.centre[s, 1]
-    sz = ez + ue * uz + kk * lo * duz - st.centre[s, 2]
+    sx = ex + ue * ux + kk * lo * dux - centre[s, 0]
+    sy = ey + ue * uy + kk * lo * duy - centre[s, 1]
+    sz = ez + ue * uz + kk * lo * duz - centre[s, 2]
     length = kk * (hi - lo)
     # the bounding sphere: the nearest approach of the segment [0, length]
     along = -(sx * dux + sy * duy + sz * duz)
     along = min(max(along, 0.0), length)
     px, py, pz = sx + along * dux, sy + along * duy, sz + along * duz
-    r = st.radius[s]
+    r = radius[s]
     if px * px + py * py + pz * pz > r * r:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0
     return True, sx, sy, sz, dux, duy, duz, kk, lo, length
@@ -150,6 +153,7 @@ def moving_hits(static, box_lo, box_hi, st, o, d, t, best, prim, bu, bv, seg_hit
     ``bv`` and the segment hit ``seg_hit`` (-1: static)."""
     f, w, addr = rayhit_buffer()
     miss = np.float32(MISS_DISTANCE)
+    handle, start, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius = st
     for i in range(o.shape[0]):
         ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
         dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
@@ -158,37 +162,39 @@ def moving_hits(static, box_lo, box_hi, st, o, d, t, best, prim, bu, bv, seg_hit
                                      box_hi):
             b_t, b_p, b_u, b_v = intersect1(static, f, w, addr, o[i, 0], o[i, 1], o[i, 2],
                                             d[i, 0], d[i, 1], d[i, 2], miss)
-        for s in range(st.handle.shape[0]):
-            ok, sx, sy, sz, ux, uy, uz, kk, lo, length = rest_ray(ox, oy, oz, dx, dy, dz,
-                                                                  t[i], b_t, st, s)
+        for s in range(handle.shape[0]):
+            ok, sx, sy, sz, ux, uy, uz, kk, lo, length = rest_ray(
+                ox, oy, oz, dx, dy, dz, t[i], b_t, h, b, ig, t_ref, q, t_lo, t_hi, centre,
+                radius, s)
             if not ok:
                 continue
-            tu, pu, hu, hv = intersect1(st.handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
+            tu, pu, hu, hv = intersect1(handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
                                         np.float32(length))
             if pu < 0:
                 continue
             sl = lo + tu / kk
             if sl < b_t:
-                b_t, b_p, b_u, b_v, b_s = np.float32(sl), pu + st.start[s], hu, hv, s
+                b_t, b_p, b_u, b_v, b_s = np.float32(sl), pu + start[s], hu, hv, s
         best[i], prim[i], bu[i], bv[i], seg_hit[i] = b_t, b_p, b_u, b_v, b_s
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
-def blocked1(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tmax,
-             t):  # pragma: no cover - compiled
+def blocked1(static, box_lo, box_hi, handle, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius,
+             f, w, addr, ox, oy, oz, dx, dy, dz, tmax, t):  # pragma: no cover - compiled
     """Whether the lab segment from event (t, o) along d (float32 o, d, ``tmax``), 0 < s <
     tmax, is blocked by the static BVH ``static`` (0: none; only if it meets the box) or
-    by a segment's group of ``st`` at the time the ray passes it (:func:`rest_ray`, the
-    whole length: any blocker will do); ``f``, ``w``, ``addr``: an RTCRayHit buffer
-    (:func:`.embree.rayhit_buffer`)."""
+    by a segment's group (``handle`` and the other arrays of a :class:`SegmentTable`)
+    at the time the ray passes it (:func:`rest_ray`, the whole length: any blocker will
+    do); ``f``, ``w``, ``addr``: an RTCRayHit buffer (:func:`.embree.rayhit_buffer`)."""
     x, y, z = np.float64(ox), np.float64(oy), np.float64(oz)
-    u, v, q = np.float64(dx), np.float64(dy), np.float64(dz)
-    if static != 0 and meets_box(x, y, z, u, v, q, np.float64(tmax), box_lo, box_hi):
+    u, v, p = np.float64(dx), np.float64(dy), np.float64(dz)
+    if static != 0 and meets_box(x, y, z, u, v, p, np.float64(tmax), box_lo, box_hi):
         if occluded1(static, f, w, addr, ox, oy, oz, dx, dy, dz, tmax):
             return True
-    for s in range(st.handle.shape[0]):
-        ok, sx, sy, sz, ux, uy, uz, _, _, length = rest_ray(x, y, z, u, v, q, t, tmax, st, s)
-        if ok and occluded1(st.handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
+    for s in range(handle.shape[0]):
+        ok, sx, sy, sz, ux, uy, uz, _, _, length = rest_ray(
+            x, y, z, u, v, p, t, tmax, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius, s)
+        if ok and occluded1(handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
                             np.float32(length)):
             return True
     return False
@@ -202,7 +208,9 @@ def blocked_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, 
     the rest-frame arithmetic) and without reference counting (``_nrt=False``: it
     allocates nothing and only reads its caller's arrays), so a call costs no atomic
     operation per array argument."""
-    return blocked1(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, tmax, t)
+    handle, _, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius = st
+    return blocked1(static, box_lo, box_hi, handle, h, b, ig, t_ref, q, t_lo, t_hi, centre,
+                    radius, f, w, addr, ox, oy, oz, dx, dy, dz, tmax, t)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
@@ -210,9 +218,11 @@ def moving_blocked(static, box_lo, box_hi, st, o, d, tmax, t, blocked):
     """:func:`blocked1` of each lab segment (origins ``o``, directions ``d``, lengths
     ``tmax``, origin lab times ``t``) into ``blocked``."""
     f, w, addr = rayhit_buffer()
+    handle, _, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius = st
     for i in range(o.shape[0]):
-        blocked[i] = blocked1(static, box_lo, box_hi, st, f, w, addr, o[i, 0], o[i, 1],
-                              o[i, 2], d[i, 0], d[i, 1], d[i, 2], tmax[i], t[i])
+        blocked[i] = blocked1(static, box_lo, box_hi, handle, h, b, ig, t_ref, q, t_lo, t_hi,
+                              centre, radius, f, w, addr, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
+                              d[i, 1], d[i, 2], tmax[i], t[i])
 
 
 class MovingScene:
