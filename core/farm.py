@@ -95,6 +95,7 @@ from .output.digest import frame_digest, job_digest
 from .output.frame_files import (
     FramePlan,
     check_frame_names,
+    check_output_dir,
     exposure_chain,
     frame_is_done,
     frame_stem,
@@ -707,7 +708,8 @@ def render(job: Job, *, scheduler: str | None = None, workers: int = 0,
     """
     reporter = reporter if reporter is not None else Reporter()
     t0 = time.perf_counter()
-    check_frame_names(job)  # a bad name is one line before any cluster starts
+    check_frame_names(job)  # a bad name or output folder is one line before any cluster
+    check_output_dir(job)   # starts (and whatever the cluster's start-up does)
     with dask_client(scheduler, workers, connect_timeout, job.path) as client:
         n_workers = len(client.scheduler_info().get("workers", {})) if scheduler else workers
         result = render_on_dask(job, client, overwrite=overwrite, reporter=reporter,
