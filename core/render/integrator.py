@@ -1274,13 +1274,9 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
             cross_area_lights(sc, paths, rays, hits, m, depth, nlanes)
         m, ns, _ = shade(sc, paths, rays, hits, shadows, m, depth, max_depth, nlanes,
                          sky_seen, feats, features, tracer, in_kernel)
-        if ns:
-            if sc.tex.cutouts:  # shadows through the holes too
-                blocked = occluded_through(sc, accel, shadows.o[:ns], shadows.d[:ns],
-                                           shadows.t[:ns], shadows.t0[:ns])
-            else:
-                blocked = accel.occluded(shadows.o[:ns], shadows.d[:ns], shadows.t[:ns],
-                                         shadows.t0[:ns], b["moving"])
+        if ns:  # (only with alpha masks: their shadows go through the holes too)
+            blocked = occluded_through(sc, accel, shadows.o[:ns], shadows.d[:ns],
+                                       shadows.t[:ns], shadows.t0[:ns])
             add_shadows(shadows.idx[:ns], blocked, shadows.c[:ns], paths.L, nlanes)
         if m == 0:
             break

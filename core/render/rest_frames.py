@@ -290,7 +290,7 @@ class MovingScene:
 
 def static_query_args(static: Accel) -> tuple:
     """:meth:`MovingScene.query_args` of a static scene: its handle and box, no segment."""
-    return static.handle, static.box_lo, static.box_hi, _segments([], static.origin)
+    return static.handle, static.box_lo, static.box_hi, _NO_SEGMENTS
 
 
 def _segments(groups: list[GroupAccel], lab_origin: np.ndarray) -> SegmentTable:
@@ -312,3 +312,6 @@ def _segments(groups: list[GroupAccel], lab_origin: np.ndarray) -> SegmentTable:
         t_hi=np.array([s.t_hi for _, s in segs], np.float64).reshape(n),
         centre=np.array([g.accel.origin for g, _ in segs], np.float64).reshape(n, 3),
         radius=np.array([g.accel.bound_radius for g, _ in segs], np.float64).reshape(n))
+
+
+_NO_SEGMENTS = _segments([], np.zeros(3))  # a static scene's: built once, not per wavefront
