@@ -183,13 +183,17 @@ def _transform_mesh(
     linear = shapes.rotation_z(params["rotation_z"]) @ np.diag(params["scale"])
     if params["up"] == "y" and params["file"].suffix.lower() not in (".glb", ".gltf"):
         linear = linear @ gltf.Y_UP_TO_Z_UP  # glTF files are converted while reading
-    tris = triangles @ linear.T + params["translate"]
+    # (3F, 3)·(3, 3): one BLAS product (np.dot), not F stacked 3×3 ones
+    tris = triangles.reshape(-1, 3).dot(np.ascontiguousarray(linear.T))
+    tris += params["translate"]
+    tris = tris.reshape(-1, 3, 3)
     if np.linalg.det(linear) < 0:  # never for scale > 0, kept for safety
         tris = tris[:, [0, 2, 1]]
         normals = normals[:, [0, 2, 1]] if normals is not None else None
         uvs = uvs[:, [0, 2, 1]] if uvs is not None else None
     if normals is not None:
-        normals = normals @ np.linalg.inv(linear)  # (M^-T n) for row vectors
+        # (M^-T n) for row vectors
+        normals = normals.reshape(-1, 3).dot(np.linalg.inv(linear)).reshape(-1, 3, 3)
     return tris, normals, uvs
 
 
@@ -217,7 +221,11 @@ def _read_mesh_file(params: dict, key: str, job_file: Path) -> Mesh:
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise UserError(f"mesh file {path} has out-of-range face indices", key=key,
                         file=job_file)
-    problem = shapes.coordinate_problem(vertices[faces])
+    # the vertex table first (a shared vertex is checked once); only the vertices that
+    # faces use count, so a problem there is confirmed on them
+    problem = shapes.coordinate_problem(vertices)
+    if problem is not None:
+        problem = shapes.coordinate_problem(vertices[faces])
     if problem is not None:
         raise UserError(f"mesh file {path}: {problem}", key=key, file=job_file)
     uvs = None
@@ -329,9 +337,9 @@ def _drop_degenerate(
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _finite_centre(tris):
-    """The centre of the bounding box of the triangles whose vertices are all finite
-    (the origin when none is)."""
+def _finite_bounds(tris):
+    """The bounding box (lo, hi) of the triangles whose vertices are all finite
+    (lo > hi when none is)."""
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     for i in range(tris.shape[0]):
@@ -345,9 +353,14 @@ def _finite_centre(tris):
                 for a in range(3):
                     lo[a] = min(lo[a], tris[i, k, a])
                     hi[a] = max(hi[a], tris[i, k, a])
-    if not lo[0] <= hi[0]:
-        return np.zeros(3)
-    return 0.5 * (lo + hi)
+    return lo, hi
+
+
+def _finite_centre(tris: np.ndarray) -> np.ndarray:
+    """The centre of the bounding box of the triangles whose vertices are all finite
+    (the origin when none is)."""
+    lo, hi = _finite_bounds(tris)
+    return 0.5 * (lo + hi) if lo[0] <= hi[0] else np.zeros(3)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -507,7 +520,7 @@ def scene_from_parts(
         raise ValueError(f"material ids {ids.min()}..{ids.max()} do not index "
                          f"{len(materials)} materials")
     if uvs is not None:
-        uvs = np.asarray(uvs, dtype=np.float64).reshape(-1, 3, 2)
+        uvs = np.asarray(uvs).reshape(-1, 3, 2)
         if not np.all(np.isfinite(uvs)):
             raise ValueError("texture coordinates must be finite")
     parts = [_Part(tris, None if normals is None else
@@ -524,7 +537,7 @@ def scene_from_parts(
 
     triangles, normals, material_ids, uvs = _concatenate(parts)
     triangles, normals, material_ids, keep = _drop_degenerate(triangles, normals, material_ids)
-    uvs = uvs[keep]
+    uvs = None if uvs is None else uvs[keep]
     # the quads (static) follow the given triangles: after the stable sort by group they
     # are still the last static ones
     light_triangles = int(np.count_nonzero(keep[n_given:]))
@@ -534,7 +547,7 @@ def scene_from_parts(
         order = np.argsort(tri_group, kind="stable")
         triangles, material_ids, tri_group = triangles[order], material_ids[order], \
             tri_group[order]
-        uvs = uvs[order]
+        uvs = None if uvs is None else uvs[order]
         normals = None if normals is None else normals[order]
     dropped = int(len(keep) - keep.sum())
     if len(triangles) == 0:  # one message: the error says why (no warning before it)
@@ -548,11 +561,11 @@ def scene_from_parts(
         normals = _clean_normals(normals, triangles)
     unresolved = _count_unresolved(triangles)
     if unresolved:
-        lo, hi = triangles.reshape(-1, 3).min(axis=0), triangles.reshape(-1, 3).max(axis=0)
+        extent = _extent(triangles)
         log.warning("%d triangles are smaller than the ray offset %.3g (%g of the scene's "
                     "extent %.3g): float32 rays cannot resolve them; they may render "
                     "wrongly (see README, Numerical limits)", unresolved,
-                    ray_offset(float(np.max(hi - lo))), RAY_OFFSET_REL, float(np.max(hi - lo)))
+                    ray_offset(extent), RAY_OFFSET_REL, extent)
     return Scene(
         triangles=np.ascontiguousarray(triangles, dtype=np.float64),
         normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
@@ -567,7 +580,8 @@ def scene_from_parts(
         groups=tuple(groups),
         light_triangles=light_triangles,
         environment=environment,
-        uvs=np.ascontiguousarray(uvs, dtype=np.float32),
+        uvs=np.zeros((len(triangles), 3, 2), np.float32) if uvs is None else
+        np.ascontiguousarray(uvs, dtype=np.float32),
     )
 
 
@@ -584,10 +598,15 @@ def ray_offset_at(base, px, py, pz):
     return base + RAY_OFFSET_POINT * max(abs(px), max(abs(py), abs(pz)))
 
 
+def _extent(triangles: np.ndarray) -> float:
+    """The largest side of the bounding box of the (finite) triangles."""
+    lo, hi = _finite_bounds(np.ascontiguousarray(triangles, np.float64))
+    return float(np.max(hi - lo))
+
+
 def _count_unresolved(triangles: np.ndarray) -> int:
     """Triangles whose longest edge is below the ray offset (see the module docstring)."""
-    pts = triangles.reshape(-1, 3)
-    eps = ray_offset(float(np.max(pts.max(axis=0) - pts.min(axis=0))))
+    eps = ray_offset(_extent(triangles))
     return int(_count_shorter(np.ascontiguousarray(triangles, np.float64), eps))
 
 
@@ -610,11 +629,15 @@ def _count_shorter(tris, eps):
 
 def _concatenate(parts: list[_Part]
                  ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
-    """Triangles, normals (None when no part has them), material ids, UVs (zeros where
-    a part has none) of the parts in order."""
+    """Triangles, normals (None when no part has them), material ids, UVs (None when no
+    part has them, else zeros where a part has none) of the parts in order."""
     parts = [p for p in parts if len(p.triangles)]
     if not parts:
-        return np.zeros((0, 3, 3)), None, np.zeros(0, dtype=np.int32), np.zeros((0, 3, 2))
+        return np.zeros((0, 3, 3)), None, np.zeros(0, dtype=np.int32), None
+    if len(parts) == 1:  # a single mesh: no copy
+        p = parts[0]
+        return (p.triangles, p.normals, np.broadcast_to(
+            np.asarray(p.material_id, dtype=np.int32), (len(p.triangles),)), p.uvs)
     triangles = np.concatenate([p.triangles for p in parts])
     ids = np.concatenate([np.broadcast_to(np.asarray(p.material_id, dtype=np.int32),
                                           (len(p.triangles),)) for p in parts])
@@ -624,6 +647,12 @@ def _concatenate(parts: list[_Part]
             p.normals if p.normals is not None else _repeat_face_normals(p.triangles)
             for p in parts
         ])
-    uvs = np.concatenate([p.uvs if p.uvs is not None else np.zeros((len(p.triangles), 3, 2))
-                          for p in parts])
+    uvs = None
+    if any(p.uvs is not None for p in parts):  # float32 zeros, then the parts' UVs
+        uvs = np.zeros((len(triangles), 3, 2), np.float32)
+        start = 0
+        for p in parts:
+            if p.uvs is not None:
+                uvs[start:start + len(p.triangles)] = p.uvs
+            start += len(p.triangles)
     return triangles, normals, ids, uvs
