@@ -611,7 +611,10 @@ def aberrate_doppler_ray(dx, dy, dz, hx, hy, hz, b, inv_g):
     with the chord c = d' - β̂ (β̂ = (hx, hy, hz), b = |β|, inv_g = 1/γ),
     1 - cos θ' = |c|²/2, d_lab ∝ ((1 - b) - (1 - cos θ')) β̂ + (c - (c·β̂) β̂)/γ and
     D = 1/(γ (1 - β·d')) with 1 - β·d' = (1 - b) + b (1 - cos θ').
-    Call only for b > 0 (at β = 0, d_lab = d' and D = 1 exactly).
+    That vector's length is 1 - β·d' itself (with x = cos θ': |c_⊥|² = 1 - x² and
+    a = x - b, so a² + (1 - b²)(1 - x²) = (1 - b x)²): one division normalises it and
+    gives D, no square root. Call only for b > 0 (at β = 0, d_lab = d' and D = 1
+    exactly).
     """
     cx, cy, cz = dx - hx, dy - hy, dz - hz
     omc = 0.5 * (cx * cx + cy * cy + cz * cz)
@@ -620,9 +623,8 @@ def aberrate_doppler_ray(dx, dy, dz, hx, hy, hz, b, inv_g):
     lx = a * hx + inv_g * (cx - ch * hx)
     ly = a * hy + inv_g * (cy - ch * hy)
     lz = a * hz + inv_g * (cz - ch * hz)
-    inv = 1.0 / math.sqrt(lx * lx + ly * ly + lz * lz)
-    D = inv_g / ((1.0 - b) + b * omc)
-    return lx * inv, ly * inv, lz * inv, D
+    inv = 1.0 / ((1.0 - b) + b * omc)  # 1 / |l| = 1 / (1 - β·d')
+    return lx * inv, ly * inv, lz * inv, inv_g * inv
 
 
 def beta_kernel_args(beta: ArrayLike) -> tuple[float, float, float, float, float]:

@@ -53,22 +53,23 @@ class GroupAccel:
 
 class SegmentTable(NamedTuple):
     """Per segment of every group, in the kernels' order (group by group): the group's
-    Embree scene, its first triangle, the direction of u (S, 3), |u|, 1/γ, the frame
-    origin event (t_ref, p_ref in accelerator coordinates), the emission window
-    [t_lo, t_hi), and the group's bounding sphere (centre = its BVH's origin, radius)."""
+    Embree scene (``handle``, uint64 (S,)), its first triangle (``start``, int32 (S,)),
+    and one float64 row of the segment's constants (``f``, (S, :data:`SEG_COLUMNS`)):
+    the direction of u (``H``..``H+2``), |u| (``B``), 1/γ, γ and γ²/(γ + 1) (``IG``,
+    ``G``, ``C``: no division per ray), the frame origin event (``T_REF``, p_ref in
+    accelerator coordinates ``Q``..``Q+2``), the emission window [``T_LO``, ``T_HI``)
+    and the group's bounding sphere (centre = its BVH's origin ``CEN``..``CEN+2``,
+    ``RAD``). Three arrays, so a compiled call that receives the table copies three
+    array descriptors, not one per quantity."""
 
     handle: np.ndarray
     start: np.ndarray
-    h: np.ndarray
-    b: np.ndarray
-    ig: np.ndarray
-    t_ref: np.ndarray
-    q: np.ndarray
-    t_lo: np.ndarray
-    t_hi: np.ndarray
-    centre: np.ndarray
-    radius: np.ndarray
+    f: np.ndarray
 
+
+# the columns of SegmentTable.f
+H, B, IG, G, C, T_REF, Q, T_LO, T_HI, CEN, RAD = 0, 3, 4, 5, 6, 7, 8, 11, 12, 13, 16
+SEG_COLUMNS = 17
 
 # fused multiply-adds only (no reassociation: the cancellation-free forms keep their
 # order); measured 15-30 % off the rest-frame rays
@@ -76,40 +77,37 @@ _FAST = {"contract"}
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
-def rest_ray(ox, oy, oz, dx, dy, dz, t, best, h, b, ig, t_ref, q, t_lo, t_hi, centre,
-             radius, s):  # pragma: no cover - compiled
+def rest_ray(ox, oy, oz, dx, dy, dz, t, best, sf, s):  # pragma: no cover - compiled
     """The lab ray (accelerator-local origin o, unit d, origin lab time t) as a ray of
-    segment ``s`` of a :class:`SegmentTable`, given as its arrays (u = b h, 1/γ = ig,
-    frame origin event (t_ref, q), emission window [t_lo, t_hi), bounding sphere
-    (centre, radius); arrays, not the table, so a loop reads no tuple field), for its
-    part before ``best`` (the nearest lab hit so far) and inside the window (module
-    docstring). Returns (kept, start (BVH coordinates),
-    d_u, k = s_u/s_lab, lab start s_lo, rest-frame length); not kept when the part is
-    empty or cannot reach the group's bounding sphere."""
-    lo = max(0.0, t - t_hi[s])
-    hi = min(np.float64(best), t - t_lo[s])
+    segment ``s`` (row ``s`` of a :class:`SegmentTable`'s ``sf`` = ``f``: u = b h, its
+    frame origin event, emission window and bounding sphere), for its part before
+    ``best`` (the nearest lab hit so far) and inside the window (module docstring).
+    Returns (kept, start (BVH coordinates), d_u, k = s_u/s_lab, lab start s_lo,
+    rest-frame length); not kept when the part is empty or cannot reach the group's
+    bounding sphere."""
+    lo = max(0.0, t - sf[s, T_HI])
+    hi = min(np.float64(best), t - sf[s, T_LO])
     if hi <= lo:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0
-    hx, hy, hz, bs, igs = h[s, 0], h[s, 1], h[s, 2], b[s], ig[s]
-    g = 1.0 / igs
-    c = g * g / (g + 1.0)
+    hx, hy, hz, bs = sf[s, H], sf[s, H + 1], sf[s, H + 2], sf[s, B]
+    igs, g, c = sf[s, IG], sf[s, G], sf[s, C]
     ux, uy, uz = bs * hx, bs * hy, bs * hz
     dux, duy, duz, _ = aberrate_doppler_ray(dx, dy, dz, -hx, -hy, -hz, bs, igs)
     # k = 1/D_u = γ (1 + u·d), in aberrate_doppler_ray's cancellation-free form
     cx, cy, cz = dx + hx, dy + hy, dz + hz
     kk = g * ((1.0 - bs) + 0.5 * bs * (cx * cx + cy * cy + cz * cz))
-    dt = t - t_ref[s]
-    ex, ey, ez = ox - q[s, 0], oy - q[s, 1], oz - q[s, 2]
+    dt = t - sf[s, T_REF]
+    ex, ey, ez = ox - sf[s, Q], oy - sf[s, Q + 1], oz - sf[s, Q + 2]
     ue = c * (ux * ex + uy * ey + uz * ez) - g * dt
-    sx = ex + ue * ux + kk * lo * dux - centre[s, 0]
-    sy = ey + ue * uy + kk * lo * duy - centre[s, 1]
-    sz = ez + ue * uz + kk * lo * duz - centre[s, 2]
+    sx = ex + ue * ux + kk * lo * dux - sf[s, CEN]
+    sy = ey + ue * uy + kk * lo * duy - sf[s, CEN + 1]
+    sz = ez + ue * uz + kk * lo * duz - sf[s, CEN + 2]
     length = kk * (hi - lo)
     # the bounding sphere: the nearest approach of the segment [0, length]
     along = -(sx * dux + sy * duy + sz * duz)
     along = min(max(along, 0.0), length)
     px, py, pz = sx + along * dux, sy + along * duy, sz + along * duz
-    r = radius[s]
+    r = sf[s, RAD]
     if px * px + py * py + pz * pz > r * r:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0
     return True, sx, sy, sz, dux, duy, duz, kk, lo, length
@@ -142,48 +140,59 @@ def meets_box(ox, oy, oz, dx, dy, dz, s_max, lo, hi):  # pragma: no cover - comp
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
-def moving_hits(static, box_lo, box_hi, st, o, d, t, best, prim, bu, bv, seg_hit):
-    """Nearest hits of lab rays (accelerator-local origins ``o``, unit ``d``, origin lab
-    times ``t``) over the static BVH ``static`` (an Embree scene handle, 0: none; traced
-    only by rays that meet its box [``box_lo``, ``box_hi``]) and every segment of ``st``:
-    each segment's rest-frame ray (:func:`rest_ray`) is traced in its group's BVH, its
-    hit converted to the lab parameter s_lo + s_u/k, and the smallest wins. Writes the
-    lab distance ``best`` (``MISS_DISTANCE`` on a miss), triangle ``prim`` (-1), ``bu``,
-    ``bv`` and the segment hit ``seg_hit`` (-1: static)."""
-    f, w, addr = rayhit_buffer()
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
+def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz,
+                t):  # pragma: no cover - compiled
+    """The nearest hit of one lab ray (float32 accelerator-local origin o, unit d, origin
+    lab time ``t``) over the static BVH ``static`` (an Embree scene handle, 0: none;
+    traced only if the ray meets its box [``box_lo``, ``box_hi``]) and every segment of
+    the :class:`SegmentTable` ``st``: each segment's rest-frame ray (:func:`rest_ray`) is
+    traced in its group's BVH, its hit converted to the lab parameter s_lo + s_u/k, and
+    the smallest wins. Returns (lab distance (``MISS_DISTANCE`` on a miss), triangle
+    (-1), u, v, segment hit (-1: static)); ``f``, ``w``, ``addr``: an RTCRayHit buffer."""
+    handle, start, sf = st
     miss = np.float32(MISS_DISTANCE)
-    handle, start, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius = st
+    x, y, z = np.float64(ox), np.float64(oy), np.float64(oz)
+    u, v, p = np.float64(dx), np.float64(dy), np.float64(dz)
+    b_t, b_p, b_u, b_v, b_s = miss, -1, np.float32(0.0), np.float32(0.0), -1
+    if static != 0 and meets_box(x, y, z, u, v, p, np.float64(miss), box_lo, box_hi):
+        b_t, b_p, b_u, b_v = intersect1(static, f, w, addr, ox, oy, oz, dx, dy, dz, miss)
+    for s in range(handle.shape[0]):
+        ok, sx, sy, sz, ux, uy, uz, kk, lo, length = rest_ray(x, y, z, u, v, p, t, b_t, sf,
+                                                              s)
+        if not ok:
+            continue
+        tu, pu, hu, hv = intersect1(handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
+                                    np.float32(length))
+        if pu < 0:
+            continue
+        sl = lo + tu / kk
+        if sl < b_t:
+            b_t, b_p, b_u, b_v, b_s = np.float32(sl), pu + start[s], hu, hv, s
+    return b_t, b_p, b_u, b_v, b_s
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, _nrt=False)
+def moving_hits(static, box_lo, box_hi, st, rayhit, o, d, t, best, prim, bu, bv, seg_hit):
+    """:func:`nearest_ray` of lab rays (accelerator-local origins ``o``, unit ``d``, origin
+    lab times ``t``): the lab distance into ``best`` (``MISS_DISTANCE`` on a miss),
+    triangle ``prim`` (-1), ``bu``, ``bv`` and the segment hit ``seg_hit`` (-1: static).
+    ``rayhit``: the caller's RTCRayHit buffer (:func:`.embree.rayhit_buffer`). Compiled
+    without reference counting (``_nrt=False``: nothing is allocated), so the inlined
+    per-ray code costs no atomic operation per array of the segment table."""
+    f, w, addr = rayhit
     for i in range(o.shape[0]):
-        ox, oy, oz = np.float64(o[i, 0]), np.float64(o[i, 1]), np.float64(o[i, 2])
-        dx, dy, dz = np.float64(d[i, 0]), np.float64(d[i, 1]), np.float64(d[i, 2])
-        b_t, b_p, b_u, b_v, b_s = miss, -1, np.float32(0.0), np.float32(0.0), -1
-        if static != 0 and meets_box(ox, oy, oz, dx, dy, dz, np.float64(miss), box_lo,
-                                     box_hi):
-            b_t, b_p, b_u, b_v = intersect1(static, f, w, addr, o[i, 0], o[i, 1], o[i, 2],
-                                            d[i, 0], d[i, 1], d[i, 2], miss)
-        for s in range(handle.shape[0]):
-            ok, sx, sy, sz, ux, uy, uz, kk, lo, length = rest_ray(
-                ox, oy, oz, dx, dy, dz, t[i], b_t, h, b, ig, t_ref, q, t_lo, t_hi, centre,
-                radius, s)
-            if not ok:
-                continue
-            tu, pu, hu, hv = intersect1(handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
-                                        np.float32(length))
-            if pu < 0:
-                continue
-            sl = lo + tu / kk
-            if sl < b_t:
-                b_t, b_p, b_u, b_v, b_s = np.float32(sl), pu + start[s], hu, hv, s
-        best[i], prim[i], bu[i], bv[i], seg_hit[i] = b_t, b_p, b_u, b_v, b_s
+        best[i], prim[i], bu[i], bv[i], seg_hit[i] = nearest_ray(
+            static, box_lo, box_hi, st, f, w, addr, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
+            d[i, 1], d[i, 2], t[i])
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
-def blocked1(static, box_lo, box_hi, handle, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius,
-             f, w, addr, ox, oy, oz, dx, dy, dz, tmax, t):  # pragma: no cover - compiled
+def blocked1(static, box_lo, box_hi, handle, sf, f, w, addr, ox, oy, oz, dx, dy, dz, tmax,
+             t):  # pragma: no cover - compiled
     """Whether the lab segment from event (t, o) along d (float32 o, d, ``tmax``), 0 < s <
     tmax, is blocked by the static BVH ``static`` (0: none; only if it meets the box) or
-    by a segment's group (``handle`` and the other arrays of a :class:`SegmentTable`)
+    by a segment's group (``handle`` and ``sf`` = ``f`` of a :class:`SegmentTable`)
     at the time the ray passes it (:func:`rest_ray`, the whole length: any blocker will
     do); ``f``, ``w``, ``addr``: an RTCRayHit buffer (:func:`.embree.rayhit_buffer`)."""
     x, y, z = np.float64(ox), np.float64(oy), np.float64(oz)
@@ -192,8 +201,7 @@ def blocked1(static, box_lo, box_hi, handle, h, b, ig, t_ref, q, t_lo, t_hi, cen
         if occluded1(static, f, w, addr, ox, oy, oz, dx, dy, dz, tmax):
             return True
     for s in range(handle.shape[0]):
-        ok, sx, sy, sz, ux, uy, uz, _, _, length = rest_ray(
-            x, y, z, u, v, p, t, tmax, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius, s)
+        ok, sx, sy, sz, ux, uy, uz, _, _, length = rest_ray(x, y, z, u, v, p, t, tmax, sf, s)
         if ok and occluded1(handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
                             np.float32(length)):
             return True
@@ -208,21 +216,21 @@ def blocked_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, 
     the rest-frame arithmetic) and without reference counting (``_nrt=False``: it
     allocates nothing and only reads its caller's arrays), so a call costs no atomic
     operation per array argument."""
-    handle, _, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius = st
-    return blocked1(static, box_lo, box_hi, handle, h, b, ig, t_ref, q, t_lo, t_hi, centre,
-                    radius, f, w, addr, ox, oy, oz, dx, dy, dz, tmax, t)
+    handle, _, sf = st
+    return blocked1(static, box_lo, box_hi, handle, sf, f, w, addr, ox, oy, oz, dx, dy, dz,
+                    tmax, t)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
-def moving_blocked(static, box_lo, box_hi, st, o, d, tmax, t, blocked):
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, _nrt=False)
+def moving_blocked(static, box_lo, box_hi, st, rayhit, o, d, tmax, t, blocked):
     """:func:`blocked1` of each lab segment (origins ``o``, directions ``d``, lengths
-    ``tmax``, origin lab times ``t``) into ``blocked``."""
-    f, w, addr = rayhit_buffer()
-    handle, _, h, b, ig, t_ref, q, t_lo, t_hi, centre, radius = st
+    ``tmax``, origin lab times ``t``) into ``blocked``; ``rayhit`` as for
+    :func:`moving_hits` (and compiled, like it, without reference counting)."""
+    f, w, addr = rayhit
+    handle, _, sf = st
     for i in range(o.shape[0]):
-        blocked[i] = blocked1(static, box_lo, box_hi, handle, h, b, ig, t_ref, q, t_lo, t_hi,
-                              centre, radius, f, w, addr, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
-                              d[i, 1], d[i, 2], tmax[i], t[i])
+        blocked[i] = blocked1(static, box_lo, box_hi, handle, sf, f, w, addr, o[i, 0],
+                              o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], tmax[i], t[i])
 
 
 class MovingScene:
@@ -263,7 +271,7 @@ class MovingScene:
         buf = self._buffers({} if buffers is None else buffers, n)
         out = Hits(buf["best"][:n], buf["prim"][:n], buf["u"][:n], buf["v"][:n],
                    buf["seg"][:n])
-        moving_hits(*self.query_args(), as_rays(o), as_rays(d),
+        moving_hits(*self.query_args(), rayhit_buffer(), as_rays(o), as_rays(d),
                     np.ascontiguousarray(t, np.float64), out.t, out.prim, out.u, out.v,
                     out.seg)
         return out
@@ -275,7 +283,7 @@ class MovingScene:
         (:func:`moving_blocked`)."""
         n = len(o)
         blocked = self._buffers({} if buffers is None else buffers, n)["blocked"][:n]
-        moving_blocked(*self.query_args(), as_rays(o), as_rays(d),
+        moving_blocked(*self.query_args(), rayhit_buffer(), as_rays(o), as_rays(d),
                        np.ascontiguousarray(tmax, np.float32),
                        np.ascontiguousarray(t, np.float64), blocked)
         return blocked
@@ -284,8 +292,10 @@ class MovingScene:
         """For the kernels, per segment: unit direction of u (S, 3), |u| (S,), 1/γ (S,),
         and its frame: t_ref (S,), p_ref in accelerator coordinates (S, 3), the origin of
         its group's BVH in rest-frame coordinates (S, 3)."""
-        st = self.segments
-        return st.h, st.b, st.ig, st.t_ref, st.q, st.centre
+        sf = self.segments.f
+        vec, one = (lambda a: np.ascontiguousarray(sf[:, a:a + 3])), (
+            lambda a: np.ascontiguousarray(sf[:, a]))
+        return vec(H), one(B), one(IG), one(T_REF), vec(Q), vec(CEN)
 
 
 def static_query_args(static: Accel) -> tuple:
@@ -296,22 +306,19 @@ def static_query_args(static: Accel) -> tuple:
 def _segments(groups: list[GroupAccel], lab_origin: np.ndarray) -> SegmentTable:
     """The :class:`SegmentTable` of the groups' segments, group by group."""
     segs = [(g, s) for g in groups for s in g.segments]
-    n = len(segs)
-    b = np.array([float(np.linalg.norm(s.u)) for _, s in segs], np.float64).reshape(n)
-    h = np.zeros((n, 3))
-    for i, (_, s) in enumerate(segs):
-        if b[i] > 0.0:
-            h[i] = s.u / b[i]
+    f = np.zeros((len(segs), SEG_COLUMNS))
+    for i, (grp, s) in enumerate(segs):
+        b = float(np.linalg.norm(s.u))
+        if b > 0.0:
+            f[i, H:H + 3] = s.u / b
+        g = s.gamma
+        f[i, B], f[i, IG], f[i, G], f[i, C] = b, 1.0 / g, g, g * g / (g + 1.0)
+        f[i, T_REF], f[i, Q:Q + 3] = s.t_ref, s.p_ref - lab_origin
+        f[i, T_LO], f[i, T_HI] = s.t_lo, s.t_hi
+        f[i, CEN:CEN + 3], f[i, RAD] = grp.accel.origin, grp.accel.bound_radius
     return SegmentTable(
-        handle=np.array([g.accel.handle for g, _ in segs], np.uint64).reshape(n),
-        start=np.array([g.start for g, _ in segs], np.int32).reshape(n),
-        h=h, b=b, ig=np.array([1.0 / s.gamma for _, s in segs], np.float64).reshape(n),
-        t_ref=np.array([s.t_ref for _, s in segs], np.float64).reshape(n),
-        q=np.array([s.p_ref - lab_origin for _, s in segs], np.float64).reshape(n, 3),
-        t_lo=np.array([s.t_lo for _, s in segs], np.float64).reshape(n),
-        t_hi=np.array([s.t_hi for _, s in segs], np.float64).reshape(n),
-        centre=np.array([g.accel.origin for g, _ in segs], np.float64).reshape(n, 3),
-        radius=np.array([g.accel.bound_radius for g, _ in segs], np.float64).reshape(n))
+        handle=np.array([g.accel.handle for g, _ in segs], np.uint64).reshape(len(segs)),
+        start=np.array([g.start for g, _ in segs], np.int32).reshape(len(segs)), f=f)
 
 
 _NO_SEGMENTS = _segments([], np.zeros(3))  # a static scene's: built once, not per wavefront
