@@ -74,8 +74,8 @@ FILM_STAGES = ("sensor_values", "film add_samples")
 #: under their own stages (rest-frame arithmetic and Embree together).
 EMBREE_LOOPS = ((accel_mod, "intersect_rays", "embree run intersect", 1),
                 (accel_mod, "occluded_rays", "embree run occluded", 1),
-                (rest_frames_mod, "moving_hits", "moving run intersect", 4),
-                (rest_frames_mod, "moving_blocked", "moving run occluded", 4))
+                (rest_frames_mod, "moving_hits", "moving run intersect", 5),
+                (rest_frames_mod, "moving_blocked", "moving run occluded", 5))
 
 
 _FAILED = object()  # a timed call that raised: no rays counted

@@ -380,7 +380,7 @@ def test_an_area_light_reads_a_pending_doppler_shift_as_the_shifted_lanes(tmp_pa
             np.zeros((n, 2), np.float32), np.ascontiguousarray(pend, np.float64))
 
     rays = integrator.Rays(np.arange(n, dtype=np.int64), o, d.astype(np.float32),
-                           np.zeros(n))
+                           np.zeros(n), np.full(n, -1, np.int32), np.zeros((n, 7), np.float32))
     hits = hits._replace(seg=np.full(n, -1, np.int32))
     at_once = paths(lamu0 + shift, np.ones(n))
     pending = paths(lamu0, D)

@@ -183,7 +183,7 @@ class KernelScene(NamedTuple):
     eps: float
     seg_h: np.ndarray   # float64 (S, 3): per moving segment, the unit direction of u
     seg_b: np.ndarray   # float64 (S,): |u|
-    seg_ig: np.ndarray  # float64 (S,): 1/γ_u
+    seg_lz: np.ndarray  # float64 (S, 3): 1/γ_u, γ_u, γ_u²/(γ_u + 1)
     seg_tref: np.ndarray  # float64 (S,): the lab time of its frame's origin event
     seg_q: np.ndarray     # float64 (S, 3): its frame's origin (accelerator coordinates)
     seg_org: np.ndarray   # float64 (S, 3): its group BVH's origin (rest-frame coordinates)
@@ -240,6 +240,9 @@ class Rays(NamedTuple):
     o: np.ndarray    # float32 (N, 3): origin (accelerator coordinates)
     d: np.ndarray    # float32 (N, 3): unit direction
     t: np.ndarray    # float64 (N,): lab time of the origin event
+    seg: np.ndarray  # int32 (N,): the moving segment whose body the ray leaves, -1: none
+    rest: np.ndarray  # float32 (N, 7): then the ray in that segment's rest frame: its
+    # origin (BVH coordinates), unit direction, k = s_u/s_lab (rest_frames.nearest_ray)
 
 
 class ShadowRays(NamedTuple):
@@ -268,7 +271,7 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
     if env is None:
         env = kernel_environment(None, "rgb", 0)
     if segments is None:
-        segments = (np.zeros((0, 3)), np.zeros(0), np.ones(0), np.zeros(0), np.zeros((0, 3)),
+        segments = (np.zeros((0, 3)), np.zeros(0), np.ones((0, 3)), np.zeros(0), np.zeros((0, 3)),
                     np.zeros((0, 3)))
     l_seg = (lights.seg if lights.seg is not None
              else np.full(len(lights.kind), -1, np.int32))
@@ -471,15 +474,15 @@ def shadow_ray_from(o, target, wi, finite):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def lab_offset(pl, g, eps, side, h, b, ig):
+def lab_offset(pl, g, eps, side, h, b, gam, cg):
     """The lab event of a point of a moving body offset off its surface: the rest-frame
     displacement y = ε · side · g (S_u) from the lab hit point ``pl`` is the lab
-    displacement Λ(-u)(0, y) = (γ u·y, y + γ²/(γ+1) (u·y) u), u = b h, ig = 1/γ.
-    Returns (the lab point, the lab time to add)."""
+    displacement Λ(-u)(0, y) = (γ u·y, y + γ²/(γ+1) (u·y) u), u = b h, ``gam`` = γ,
+    ``cg`` = γ²/(γ+1) (``KernelScene.seg_lz``). Returns (the lab point, the lab time to
+    add)."""
     yx, yy, yz = g[0] * eps * side, g[1] * eps * side, g[2] * eps * side
-    gam = 1.0 / ig
     uy = b * (h[0] * yx + h[1] * yy + h[2] * yz)
-    c = gam * gam / (gam + 1.0) * uy * b
+    c = cg * uy * b
     return (pl[0] + yx + c * h[0], pl[1] + yy + c * h[1], pl[2] + yz + c * h[2]), gam * uy
 
 
@@ -502,13 +505,13 @@ def lerp_at(table, row, u, top):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def to_rest(p, t, h, b, ig, t_ref, q, org):
+def to_rest(p, t, h, b, g, cg, t_ref, q, org):
     """The lab event (t, p) (accelerator coordinates) in a segment's rest frame, as a
     point of its group's BVH coordinates: Λ(u)'s spatial part of (t - t_ref, p - q),
-    x + γ²/(γ+1) (u·x) u - γ u Δt, minus the BVH origin ``org`` (u = b h, ig = 1/γ)."""
-    g = 1.0 / ig
+    x + γ²/(γ+1) (u·x) u - γ u Δt, minus the BVH origin ``org`` (u = b h, ``g`` = γ,
+    ``cg`` = γ²/(γ+1))."""
     ex, ey, ez = p[0] - q[0], p[1] - q[1], p[2] - q[2]
-    c = (g * g / (g + 1.0) * b * (h[0] * ex + h[1] * ey + h[2] * ez) - g * (t - t_ref)) * b
+    c = (cg * b * (h[0] * ex + h[1] * ey + h[2] * ez) - g * (t - t_ref)) * b
     return ex + c * h[0] - org[0], ey + c * h[1] - org[1], ez + c * h[2] - org[2]
 
 
@@ -630,7 +633,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     (s_v0, s_e1, s_e2, s_ng, s_area, s_vn, s_has_vn, s_tri_mat, s_refl, s_emit, s_mat_w,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
-     s_eps, s_seg_h, s_seg_b, s_seg_ig, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
+     s_eps, s_seg_h, s_seg_b, s_seg_lz, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
      s_beam, _, s_mat_rgb, s_env_on, s_env_tex, s_env_marg, s_env_cond, s_env_pmf, s_env_rot,
      s_env_row, s_env_nm, s_tex) = sc
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
@@ -639,7 +642,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     f_pend, f_thr, f_alb, f_nrm = feats
     (keys, L, thr, li, lf, prev_pdf, prev_delta, e_row, e_val, lamu, prev_moving,
      cone, pend) = paths
-    idx, o, d, rt = rays
+    idx, o, d, rt, r_seg, r_rest = rays
     t_hit, prim, bu, bv, hseg = hits
     sh_idx, sh_o, sh_d, sh_t, sh_c, sh_t0 = shadows
     tr_static, tr_lo, tr_hi, tr_segs = tracer
@@ -705,13 +708,13 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
         sh = (0.0, 0.0, 0.0)
         sb = 0.0
-        sig = 1.0
+        sig, sgam, scg = 1.0, 1.0, 0.5
         d_out = 1.0
         pl = (o[i, 0], o[i, 1], o[i, 2])
         if moving:
             sh = (s_seg_h[sg, 0], s_seg_h[sg, 1], s_seg_h[sg, 2])
             sb = s_seg_b[sg]
-            sig = s_seg_ig[sg]
+            sig, sgam, scg = s_seg_lz[sg, 0], s_seg_lz[sg, 1], s_seg_lz[sg, 2]
             pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
             rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb, sig)
             dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
@@ -870,8 +873,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             elif ls >= 0:  # a moving triangle light, sampled in its rest frame
                 lh = (s_seg_h[ls, 0], s_seg_h[ls, 1], s_seg_h[ls, 2])
                 lb = s_seg_b[ls]
-                lig = s_seg_ig[ls]
-                xr = to_rest(p, t_ev, lh, lb, lig, s_seg_tref[ls],
+                lig = s_seg_lz[ls, 0]
+                xr = to_rest(p, t_ev, lh, lb, s_seg_lz[ls, 1], s_seg_lz[ls, 2], s_seg_tref[ls],
                              (s_seg_q[ls, 0], s_seg_q[ls, 1], s_seg_q[ls, 2]),
                              (s_seg_org[ls, 0], s_seg_org[ls, 1], s_seg_org[ls, 2]))
                 wr, p_r, scale, delta, finite, target, ok = sample_light(
@@ -910,7 +913,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                         * env_lane(s_env_tex, r_e, c_e, j, rgb_lanes, lu,
                                    lerp_at(s_emit, s_env_row, lu, top), s_env_nm)
                 if moving:
-                    so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
+                    so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
                     so, sd, st = shadow_ray_from(so, target, wi, False)
                     sh_t0[n_sh] = t_ev + dt_o
                 else:
@@ -935,7 +938,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                         sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
                             * lerp_at(s_emit, row, lamu[pi, j] + lshift, top)
                     if moving:
-                        so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sig)
+                        so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
                         so, sd, st = shadow_ray_from(so, target, wi, finite)
                         sh_t0[n_sh] = t_ev + dt_o
                     else:  # towards the moving light's emission event, r_l away along wi
@@ -968,6 +971,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             wo, nrm, g, front, wd, wm, wg, a, s_mat_ior[m], rand(key, dim_lobe), u1, u2)
         if not ok:
             continue
+        wi_rest = wi  # a moving body's: in its rest frame (turned into the lab below)
         for j in range(nlanes):
             thr[pi, j] *= lane_weight(weight, rho_j[j])
         if t_on:
@@ -999,12 +1003,22 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     thr[pi, j] /= q
         k_a = n_alive
         idx[k_a] = pi
+        side = -1.0 if transmitted else 1.0
         if moving:
-            o_next, dt_o = lab_offset(pl, g, eps, -1.0 if transmitted else 1.0, sh, sb, sig)
+            o_next, dt_o = lab_offset(pl, g, eps, side, sh, sb, sgam, scg)
             rt[k_a] = t_ev + dt_o
+            # the same ray in the body's rest frame, where it was made (the tracer need
+            # not transform it back): offset origin, direction, k = D_out
+            o_rest = offset_point(p, g, eps, side)
+            r_seg[k_a] = sg
+            r_rest[k_a, 0], r_rest[k_a, 1], r_rest[k_a, 2] = o_rest[0], o_rest[1], o_rest[2]
+            r_rest[k_a, 3], r_rest[k_a, 4], r_rest[k_a, 5] = wi_rest[0], wi_rest[1], \
+                wi_rest[2]
+            r_rest[k_a, 6] = d_out
         else:
-            o_next = offset_point(p, g, eps, -1.0 if transmitted else 1.0)
+            o_next = offset_point(p, g, eps, side)
             rt[k_a] = t_ev
+            r_seg[k_a] = -1
         o[k_a, 0], o[k_a, 1], o[k_a, 2] = o_next[0], o_next[1], o_next[2]
         d[k_a, 0], d[k_a, 1], d[k_a, 2] = wi[0], wi[1], wi[2]
         n_alive += 1
@@ -1124,7 +1138,7 @@ _TRACE_BUFFERS = (("L", 4, np.float32), ("thr", 4, np.float32), ("prev_pdf", 0, 
                   ("e_row", 0, np.int32), ("e_val", 4, np.float32), ("lamu", 4, np.float32),
                   ("rt", 0, np.float64), ("sh_t0", 0, np.float64), ("seg", 0, np.int32),
                   ("prev_moving", 0, np.int32), ("cone", 2, np.float32),
-                  ("pend", 0, np.float64))
+                  ("pend", 0, np.float64), ("rseg", 0, np.int32), ("rrest", 7, np.float32))
 
 
 _FEATURE_BUFFERS = (("pending", 0, np.int32), ("thr", 3, np.float32),
@@ -1238,8 +1252,9 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     # shade compacts the rays in place: float32 C-contiguous inputs are used (and
     # overwritten) as they are, anything else is converted once
     rays = Rays(b["idx"], np.ascontiguousarray(o_local, np.float32),
-                np.ascontiguousarray(d, np.float32), b["rt"])
+                np.ascontiguousarray(d, np.float32), b["rt"], b["rseg"], b["rrest"])
     rays.t[:] = t0
+    rays.seg[:] = -1
     shadows = ShadowRays(b["sh_idx"], b["sh_o"], b["sh_d"], b["sh_t"], b["sh_c"], b["sh_t0"])
     column_split(lamu, sc.emit.shape[1], paths.li, paths.lf)
     feats = _NO_FEATURES
@@ -1263,7 +1278,8 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     m = n
     for depth in range(max_depth):
         if moving:
-            hits = accel.intersect(rays.o[:m], rays.d[:m], rays.t[:m], b["moving"])
+            hits = accel.intersect(rays.o[:m], rays.d[:m], rays.t[:m], b["moving"],
+                                   rays.seg[:m], rays.rest[:m])
         else:
             hits = accel.intersect(rays.o[:m], rays.d[:m])._replace(seg=static_seg[:m])
         if sc.tex.cutouts:  # through the holes of alpha-masked materials: no bounce

@@ -141,15 +141,20 @@ def meets_box(ox, oy, oz, dx, dy, dz, s_max, lo, hi):  # pragma: no cover - comp
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
-def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz,
-                t):  # pragma: no cover - compiled
+def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, t, cs,
+                rest, i):  # pragma: no cover - compiled
     """The nearest hit of one lab ray (float32 accelerator-local origin o, unit d, origin
     lab time ``t``) over the static BVH ``static`` (an Embree scene handle, 0: none;
     traced only if the ray meets its box [``box_lo``, ``box_hi``]) and every segment of
     the :class:`SegmentTable` ``st``: each segment's rest-frame ray (:func:`rest_ray`) is
     traced in its group's BVH, its hit converted to the lab parameter s_lo + s_u/k, and
-    the smallest wins. Returns (lab distance (``MISS_DISTANCE`` on a miss), triangle
-    (-1), u, v, segment hit (-1: static)); ``f``, ``w``, ``addr``: an RTCRayHit buffer."""
+    the smallest wins. A ray that leaves a body of segment ``cs`` (≥ 0) carries its form
+    in that rest frame (row ``i`` of ``rest``: origin in BVH coordinates, unit
+    direction, k), as the integrator made it there: that segment uses it instead of
+    transforming the lab ray back (the same ray up to rounding, at no cost; while the
+    origin event is inside the segment's window, so s_lo = 0). Returns (lab distance
+    (``MISS_DISTANCE`` on a miss), triangle (-1), u, v, segment hit (-1: static));
+    ``f``, ``w``, ``addr``: an RTCRayHit buffer."""
     handle, start, sf = st
     miss = np.float32(MISS_DISTANCE)
     x, y, z = np.float64(ox), np.float64(oy), np.float64(oz)
@@ -158,12 +163,21 @@ def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz,
     if static != 0 and meets_box(x, y, z, u, v, p, np.float64(miss), box_lo, box_hi):
         b_t, b_p, b_u, b_v = intersect1(static, f, w, addr, ox, oy, oz, dx, dy, dz, miss)
     for s in range(handle.shape[0]):
-        ok, sx, sy, sz, ux, uy, uz, kk, lo, length = rest_ray(x, y, z, u, v, p, t, b_t, sf,
-                                                              s)
-        if not ok:
-            continue
-        tu, pu, hu, hv = intersect1(handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
-                                    np.float32(length))
+        if s == cs and t <= sf[s, T_HI]:
+            kk, lo = np.float64(rest[i, 6]), 0.0
+            length = kk * min(np.float64(b_t), t - sf[s, T_LO])
+            if not length > 0.0:
+                continue
+            tu, pu, hu, hv = intersect1(handle[s], f, w, addr, rest[i, 0], rest[i, 1],
+                                        rest[i, 2], rest[i, 3], rest[i, 4], rest[i, 5],
+                                        np.float32(length))
+        else:
+            ok, sx, sy, sz, ux, uy, uz, kk, lo, length = rest_ray(x, y, z, u, v, p, t, b_t,
+                                                                  sf, s)
+            if not ok:
+                continue
+            tu, pu, hu, hv = intersect1(handle[s], f, w, addr, sx, sy, sz, ux, uy, uz,
+                                        np.float32(length))
         if pu < 0:
             continue
         sl = lo + tu / kk
@@ -173,18 +187,20 @@ def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz,
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, _nrt=False)
-def moving_hits(static, box_lo, box_hi, st, rayhit, o, d, t, best, prim, bu, bv, seg_hit):
+def moving_hits(static, box_lo, box_hi, st, rayhit, o, d, t, seg, rest, best, prim, bu, bv,
+                seg_hit):
     """:func:`nearest_ray` of lab rays (accelerator-local origins ``o``, unit ``d``, origin
-    lab times ``t``): the lab distance into ``best`` (``MISS_DISTANCE`` on a miss),
-    triangle ``prim`` (-1), ``bu``, ``bv`` and the segment hit ``seg_hit`` (-1: static).
-    ``rayhit``: the caller's RTCRayHit buffer (:func:`.embree.rayhit_buffer`). Compiled
-    without reference counting (``_nrt=False``: nothing is allocated), so the inlined
-    per-ray code costs no atomic operation per array of the segment table."""
+    lab times ``t``; ``seg``/``rest``: the segment each leaves, -1: none, and its
+    rest-frame form there): the lab distance into ``best`` (``MISS_DISTANCE`` on a
+    miss), triangle ``prim`` (-1), ``bu``, ``bv`` and the segment hit ``seg_hit`` (-1:
+    static). ``rayhit``: the caller's RTCRayHit buffer (:func:`.embree.rayhit_buffer`).
+    Compiled without reference counting (``_nrt=False``: nothing is allocated), so the
+    inlined per-ray code costs no atomic operation per array it reads."""
     f, w, addr = rayhit
     for i in range(o.shape[0]):
         best[i], prim[i], bu[i], bv[i], seg_hit[i] = nearest_ray(
             static, box_lo, box_hi, st, f, w, addr, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
-            d[i, 1], d[i, 2], t[i])
+            d[i, 1], d[i, 2], t[i], seg[i], rest, i)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
@@ -262,18 +278,23 @@ class MovingScene:
         return buf
 
     def intersect(self, o: np.ndarray, d: np.ndarray, t: np.ndarray,
-                  buffers: dict | None = None) -> Hits:
+                  buffers: dict | None = None, seg: np.ndarray | None = None,
+                  rest: np.ndarray | None = None) -> Hits:
         """Nearest hits of lab rays (accelerator-local origins ``o``, unit ``d``, origin
         lab times ``t``): t is the lab distance, ``seg`` the segment hit (-1 static)
         (:func:`moving_hits`). ``buffers``: a dict the caller keeps per concurrent
-        batch; the returned arrays live in it until the next call."""
+        batch; the returned arrays live in it until the next call. ``seg`` (int32
+        (N,), -1: none) and ``rest`` (float32 (N, 7)): the segment whose body each ray
+        leaves and the ray in its rest frame (:func:`nearest_ray`), or None."""
         n = len(o)
         buf = self._buffers({} if buffers is None else buffers, n)
         out = Hits(buf["best"][:n], buf["prim"][:n], buf["u"][:n], buf["v"][:n],
                    buf["seg"][:n])
+        if seg is None:
+            seg, rest = np.full(n, -1, np.int32), _NO_REST
         moving_hits(*self.query_args(), rayhit_buffer(), as_rays(o), as_rays(d),
-                    np.ascontiguousarray(t, np.float64), out.t, out.prim, out.u, out.v,
-                    out.seg)
+                    np.ascontiguousarray(t, np.float64), seg, rest, out.t, out.prim, out.u,
+                    out.v, out.seg)
         return out
 
     def occluded(self, o: np.ndarray, d: np.ndarray, tmax: np.ndarray, t: np.ndarray,
@@ -289,13 +310,13 @@ class MovingScene:
         return blocked
 
     def segment_table(self) -> tuple[np.ndarray, ...]:
-        """For the kernels, per segment: unit direction of u (S, 3), |u| (S,), 1/γ (S,),
-        and its frame: t_ref (S,), p_ref in accelerator coordinates (S, 3), the origin of
-        its group's BVH in rest-frame coordinates (S, 3)."""
+        """For the kernels, per segment: unit direction of u (S, 3), |u| (S,), (1/γ, γ,
+        γ²/(γ + 1)) (S, 3) and its frame: t_ref (S,), p_ref in accelerator coordinates (S, 3),
+        the origin of its group's BVH in rest-frame coordinates (S, 3)."""
         sf = self.segments.f
         vec, one = (lambda a: np.ascontiguousarray(sf[:, a:a + 3])), (
             lambda a: np.ascontiguousarray(sf[:, a]))
-        return vec(H), one(B), one(IG), one(T_REF), vec(Q), vec(CEN)
+        return vec(H), one(B), vec(IG), one(T_REF), vec(Q), vec(CEN)
 
 
 def static_query_args(static: Accel) -> tuple:
@@ -321,4 +342,5 @@ def _segments(groups: list[GroupAccel], lab_origin: np.ndarray) -> SegmentTable:
         start=np.array([g.start for g, _ in segs], np.int32).reshape(len(segs)), f=f)
 
 
+_NO_REST = np.zeros((1, 7), np.float32)  # the rest-frame forms of rays that carry none
 _NO_SEGMENTS = _segments([], np.zeros(3))  # a static scene's: built once, not per wavefront
