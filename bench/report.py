@@ -916,7 +916,10 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
         add("")
     load = d["peer_load"]
     if load:
-        add(f"**Loading the heavy mesh and building its BVH** (medians of "
+        lsec = meta.get("sections", {}).get("peer_load", {})
+        when = (f"section `peer_load`, run at {_when(lsec)})" if lsec else
+                "measured with the scenes above")
+        add(f"**Loading the heavy mesh and building its BVH** ({when}; medians of "
             f"{load[0]['n']} interleaved runs, wall time): relray's `build_scene` (the box "
             "and the grid's shared-vertex PLY through trimesh) + `prepare` (Embree BVH, "
             "spectral and light tables) against a fresh Mitsuba process loading the same "

@@ -11,8 +11,8 @@ Cycles, adaptive sampling), ``mitsuba`` (Mitsuba 3 ``scalar_spectral`` and
 ``llvm_ad_spectral`` as peers: converged agreement, equal-error CPU time and paths per
 CPU-second at 1 thread; Mitsuba runs in its own venv from ``make mitsuba-venv``, a
 variant that cannot start is reported with its reason), ``peer_scenes`` (the heavy,
-the environment-lit and the textured scenes against Mitsuba 3 and Cycles, and the heavy
-mesh's load + BVH time against Mitsuba's).  Cycles needs ``bpy`` (5.0.1)
+the environment-lit and the textured scenes against Mitsuba 3 and Cycles),
+``peer_load`` (the heavy mesh's load + BVH time against Mitsuba's).  Cycles needs ``bpy`` (5.0.1)
 in the environment; without it the Cycles series are left out and RESULTS.md says so.
 Generated meshes and cached references go to ``OUT/tmp`` (git-ignored).
 ``python -m relray.bench.report --out OUT`` rewrites the plots and RESULTS.md from the
@@ -47,7 +47,8 @@ from relray.bench import (
 )
 
 SECTIONS = ("throughput", "scaling", "heavy", "beta", "skips", "moving", "environment",
-            "textures", "first", "profiles", "convergence", "mitsuba", "peer_scenes")
+            "textures", "first", "profiles", "convergence", "mitsuba", "peer_scenes",
+            "peer_load")
 BETAS = [0.0, 0.5, 0.9, 0.99, 0.999]
 
 
@@ -295,6 +296,14 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
              versions={r["variant"]: r["version"] for r in res["status"]})
     if "peer_scenes" in sections:
         _run_peer_scenes(plan, out, tmp, use_cycles, use_mitsuba, section, done, log)
+    if "peer_load" in sections:
+        section("peer_load")
+        cfg = plan.peers
+        raw = peer_scenes.load_times(tmp, cfg.heavy_triangles, cfg.load_repeats,
+                                     cfg.variants if use_mitsuba else (), log=log)
+        cm.write_csv(out / "peer_load_raw.csv", raw)
+        cm.write_csv(out / "peer_load.csv", peer_scenes.load_medians(raw))
+        done("peer_load", repeats=cfg.load_repeats, triangles=cfg.heavy_triangles)
     meta["cpu_share_end"] = cm.cpu_share(seconds=plan.probe_s)
     meta["load_end"] = cm.load_average()
     meta["total_seconds"] = time.perf_counter() - t_start
@@ -316,13 +325,12 @@ def _run_peer_scenes(plan: Plan, out: Path, tmp: Path, use_cycles: bool, use_mit
         cfg = replace(cfg, variants=())
     if not use_cycles:
         cfg = replace(cfg, cycles=False)
-    res = peer_scenes.run(cfg, tmp, log=log)
+    res = peer_scenes.run(replace(cfg, load_repeats=0), tmp, log=log)  # (section peer_load)
     if not use_mitsuba:
         res["status"] += [{"scene": s, "peer": v, "ran": False,
                            "reason": "left out (--no-mitsuba)", "version": ""}
                           for s in cfg.scenes for v in mitsuba_peer.VARIANTS]
-    for name in ("status", "converged", "raw", "medians", "equal_error", "load_raw", "load",
-                 "orientation"):
+    for name in ("status", "converged", "raw", "medians", "equal_error", "orientation"):
         cm.write_csv(out / f"peer_{name}.csv", res[name])
     report.plot_peer_converged({k: v for k, v in res["refs"].items()
                                 if not k.startswith("textured_")}, out / "peer_converged.png")

@@ -90,6 +90,10 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     moving = {r["stage"]: r for r in prof if r["scene"] == "moving"}
     assert moving["velocity groups: rest-frame rays with their Embree traversals"]["seconds"] > 0.0
     assert all(r["ns_per_path"] > 0.0 for r in prof if r["stage"] == "total")
+    # the moving scene's rays are counted from its loops' ray arrays (the same paths as the
+    # box's: about as many rays; a wrong argument index counted the RTCRayHit buffer)
+    per_path = {r["scene"]: float(r["rays_per_path"]) for r in prof if r["stage"] == "total"}
+    assert per_path["moving"] > 0.6 * per_path["cornell"]
     assert "### Mitsuba 3 as a peer" in text and "left out (--no-mitsuba)" in text
     assert {r["renderer"] for r in common.read_csv(out / "mitsuba_throughput.csv")} == \
         {"relray"}
