@@ -79,7 +79,7 @@ class Plan:
     moving_size: int = 128
     moving_spp: int = 16
     moving_repeat: int = 5
-    moving_pairs: int = 15
+    moving_pairs: int = 41
     env_size: tuple[int, int] = (96, 64)
     env_spp: tuple[int, ...] = (4, 8, 16, 32, 64)
     env_bsdf_spp: tuple[int, ...] = (16, 64, 256, 1024)

@@ -716,20 +716,33 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             sb = s_seg_b[sg]
             sig, sgam, scg = s_seg_lz[sg, 0], s_seg_lz[sg, 1], s_seg_lz[sg, 2]
             pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
-            rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb, sig)
-            dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
-            k5, _ = frame_change(d_u, False, s_beam)
-            # the lanes' shift into S_u with the one still pending from the last body:
-            # one logarithm for both (pending_shift)
-            _, cols = frame_change(d_u * pend[pi], s_shift, False)
-            pend[pi] = 1.0
-            # (this loop and the one where the path leaves the body stay in shade: a
-            # device function looping over the path arrays would cost reference counts)
-            for j in range(nlanes):
-                thr[pi, j] *= k5
-                lamu[pi, j] += cols
-                li[pi, j], lf[pi, j] = column(lamu[pi, j], top)
-            e_row[pi] = -1
+            if r_seg[i] == sg:
+                # back on a body of the segment the ray left: its rest-frame direction is
+                # the one it was made with, D_u = 1/D_out exactly, so the lanes' pending
+                # shift cancels (they are still this frame's) and only the D_out⁵ the
+                # throughput took as it left is undone
+                dx, dy, dz = r_rest[i, 3], r_rest[i, 4], r_rest[i, 5]
+                if s_beam:
+                    k5, _ = frame_change(1.0 / np.float64(r_rest[i, 6]), False, s_beam)
+                    for j in range(nlanes):
+                        thr[pi, j] *= k5
+                pend[pi] = 1.0
+            else:
+                rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb,
+                                                       sig)
+                dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
+                k5, _ = frame_change(d_u, False, s_beam)
+                # the lanes' shift into S_u with the one still pending from the last body:
+                # one logarithm for both (pending_shift)
+                _, cols = frame_change(d_u * pend[pi], s_shift, False)
+                pend[pi] = 1.0
+                # (this loop and the one where the path leaves the body stay in shade: a
+                # device function looping over the path arrays would cost reference counts)
+                for j in range(nlanes):
+                    thr[pi, j] *= k5
+                    lamu[pi, j] += cols
+                    li[pi, j], lf[pi, j] = column(lamu[pi, j], top)
+                e_row[pi] = -1
         # ---- the hit and its emission
         m = s_tri_mat[tri]
         p, g = surface_point(s_v0, s_e1, s_e2, s_ng, tri, bu[i], bv[i])
