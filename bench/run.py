@@ -37,6 +37,7 @@ from relray.bench import (
     environment,
     first_render,
     mitsuba_peer,
+    moving_rays,
     peer_scenes,
     profile_scenes,
     report,
@@ -80,6 +81,7 @@ class Plan:
     moving_spp: int = 16
     moving_repeat: int = 5
     moving_pairs: int = 41
+    moving_rays: int = 200_000
     env_size: tuple[int, int] = (96, 64)
     env_spp: tuple[int, ...] = (4, 8, 16, 32, 64)
     env_bsdf_spp: tuple[int, ...] = (16, 64, 256, 1024)
@@ -106,7 +108,8 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
              profile_size=64, profile_spp=4,
              heavy_size=128, heavy_spp=8, heavy_repeat=1, beta_size=48, beta_spp=8,
              beta_repeat=1, skip_size=64, skip_spp=8, skip_ref_spp=128, skip_repeat=2,
-             moving_size=64, moving_spp=8, moving_repeat=2, moving_pairs=4, env_size=(48, 32),
+             moving_size=64, moving_spp=8, moving_repeat=2, moving_pairs=4,
+             moving_rays=20_000, env_size=(48, 32),
              env_spp=(4, 16), env_bsdf_spp=(16, 256), env_ref_spp=512, env_repeat=1,
              tex_size=64, tex_spp=8, tex_rounds=2, first_render=False,
              anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
@@ -126,7 +129,8 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
              heavy_triangles=20_000, heavy_size=16, heavy_spp=2, heavy_repeat=1,
              beta_size=8, beta_spp=2, beta_ref_factor=2, beta_repeat=1, skip_size=8,
              skip_spp=2, skip_ref_spp=4, skip_repeat=1, moving_size=8, moving_spp=2,
-             moving_repeat=1, moving_pairs=2, env_size=(8, 8), env_spp=(1, 2), env_bsdf_spp=(2, 4),
+             moving_repeat=1, moving_pairs=2, moving_rays=2_000, env_size=(8, 8),
+             env_spp=(1, 2), env_bsdf_spp=(2, 4),
              env_ref_spp=8, env_repeat=1, tex_size=8, tex_spp=1, tex_rounds=1,
              first_render=False, anim_frames=0, anim_separate=0,
              anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
@@ -239,6 +243,9 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         cm.write_csv(out / "moving_emitter_noise.csv",
                      velocity_groups.noise_rows(plan.moving_spp, plan.moving_size,
                                                 plan.moving_size, threads))
+        cm.write_csv(out / "moving_rays.csv", [
+            {"query": k, "ns_per_ray": v, "rays": plan.moving_rays}
+            for k, v in moving_rays.ray_costs(plan.moving_rays).items()])
         done("moving")
     if "environment" in sections:
         section("environment")
