@@ -1461,8 +1461,9 @@ def _section_moving(add, d) -> None:
             "light-travel time its rest-frame distance; the pdf per lab solid angle "
             "p_rest D_e², its spectrum D_e⁵ L(D_e λ)), with MIS against BSDF sampling; "
             "an emitter on a worldline of several segments is reached by BSDF sampling "
-            "only (its MIS weight is 1), as is any moving emitter seen from a moving "
-            f"vertex. The noise each costs, Cornell box {n0['width']:.0f}², "
+            "only (its MIS weight is 1), as is a moving emitter seen from another moving "
+            "body (from a point of its own body both rest in one frame, where it is "
+            f"sampled as in a static scene). The noise each costs, Cornell box {n0['width']:.0f}², "
             f"{n0['spp']:.0f} spp, relative MSE against a {n0['ref_spp']:.0f}-spp "
             "reference of the light at rest:\n")
         add(table(noise, [("variant", "variant", ""), ("relative MSE", "rel_mse", ".4f"),

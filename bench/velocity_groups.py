@@ -86,12 +86,24 @@ def light_group_scene(scene: Scene, segments: int = 1) -> Scene:
                             tri_group=tri_group, groups=(VelocityGroup(segs),))
 
 
+def whole_room_scene(scene: Scene) -> Scene:
+    """``scene`` with every triangle, its light included, in one slowly moving group: the
+    light rests in the frame of every surface it lights, and next-event estimation
+    samples it there (a lamp inside a moving ship)."""
+    u = SLOW * DIRECTIONS[0]
+    return scene_from_parts(scene.triangles, scene.normals, scene.material_ids,
+                            scene.materials, scene.lights, scene.background, scene.camera,
+                            tri_group=np.ones(len(scene.triangles), np.int32),
+                            groups=(VelocityGroup((Segment(u, 0.0, np.zeros(3)),)),))
+
+
 def noise_rows(spp: int, width: int, height: int, threads: int,
                ref_factor: int = 16) -> list[dict[str, Any]]:
     """What moving lights cost in noise: relative MSE at equal spp of the Cornell box with
     its light at rest, moving at 1e-4 c (next-event estimation in its rest frame, MIS),
-    and moving so on a worldline of two segments (BSDF sampling only), against a
-    converged render of the light at rest."""
+    moving so on a worldline of two segments (BSDF sampling only), and moving with the
+    whole room as one body (:func:`whole_room_scene`: sampled in their common rest frame),
+    against a converged render of the light at rest."""
     base = cm.RelrayBench(cm.make_job(cm.job_dict()))
     ref = base.render(spp=spp * ref_factor, width=width, height=height, threads=threads,
                       seed=1000).rgb
@@ -100,7 +112,9 @@ def noise_rows(spp: int, width: int, height: int, threads: int,
                     ("light moving: NEE in its rest frame + MIS",
                      cm.RelrayBench(base.job, scene=light_group_scene(base.scene))),
                     ("light on a 2-segment worldline: BSDF sampling only",
-                     cm.RelrayBench(base.job, scene=light_group_scene(base.scene, 2)))):
+                     cm.RelrayBench(base.job, scene=light_group_scene(base.scene, 2))),
+                    ("room and light one moving body: NEE in its rest frame + MIS",
+                     cm.RelrayBench(base.job, scene=whole_room_scene(base.scene)))):
         r = b.render(spp=spp, width=width, height=height, threads=threads)
         rows.append({"variant": name, "rel_mse": cm.rel_mse(r.rgb, ref),
                      "cpu_per_spp_s": r.cpu / spp, "spp": spp, "ref_spp": spp * ref_factor,

@@ -487,6 +487,23 @@ def lab_offset(pl, g, eps, side, h, b, gam, cg):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def body_shadow_ray(p, pl, g, eps, target, h, b, ig, gam, cg):
+    """The shadow ray from a moving body's point ``p`` towards ``target`` on a light of the
+    same body (both in its rest frame: BVH coordinates, unit normal ``g``), as the lab ray
+    the tracer takes: the origin event offset off the surface (:func:`lab_offset` from
+    the lab hit point ``pl``), the lab direction of the rest-frame one w (aberrated by
+    +u, :func:`.relativity.aberrate_doppler_ray`) and the lab length r (1 - 1e-4) / D_out,
+    D_out = 1/(γ (1 - u·w)) = s_u/s_lab. Returns (origin, unit direction, length, the lab
+    time to add to the hit's)."""
+    o_r = offset_point(p, g, eps, 1.0)
+    rx, ry, rz = target[0] - o_r[0], target[1] - o_r[1], target[2] - o_r[2]
+    r = math.sqrt(rx * rx + ry * ry + rz * rz)
+    wx, wy, wz, d_out = aberrate_doppler_ray(rx / r, ry / r, rz / r, h[0], h[1], h[2], b, ig)
+    so, dt_o = lab_offset(pl, g, eps, 1.0, h, b, gam, cg)
+    return so, (wx, wy, wz), r * (1.0 - 1e-4) / d_out, dt_o
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def lab_normal(n, h, ig):
     """The lab normal of a moving body's surface whose rest-frame unit normal is ``n``
     (velocity direction ``h``, 1/γ = ``ig``): the lab sees the surface contracted by 1/γ
@@ -832,12 +849,19 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         er = s_mat_emit_row[m]
         if er >= 0 and (front or s_mat_one_sided[m] == 0):
             w = 1.0
-            if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[tri] > 0.0 and not (
-                    moving and prev_moving[pi] == 1):
-                # (a moving light's pdf per lab solid angle is p_sel t_lab²/(A |cos θ|) with
-                # its rest-frame cos θ; from a moving vertex it is not sampled: weight 1)
-                w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
-                    s_tri_pmf[tri], s_area[tri], t_hit[i], cos_g))
+            if depth > 0 and prev_delta[pi] == 0 and s_tri_pmf[tri] > 0.0:
+                if not (moving and prev_moving[pi] == 1):
+                    # (a moving light's pdf per lab solid angle is p_sel t_lab²/(A |cos θ|)
+                    # with its rest-frame cos θ)
+                    w = power_heuristic(prev_pdf[pi], triangle_light_pdf(
+                        s_tri_pmf[tri], s_area[tri], t_hit[i], cos_g))
+                elif r_seg[i] == sg:
+                    # from a vertex of this very body: both pdfs per rest-frame solid angle
+                    # (the BSDF's was turned into the lab's by 1/D_out², the distance is
+                    # D_out t_lab); from another moving body it is not sampled: weight 1
+                    kr = np.float64(r_rest[i, 6])
+                    w = power_heuristic(prev_pdf[pi] * kr * kr, triangle_light_pdf(
+                        s_tri_pmf[tri], s_area[tri], t_hit[i] * kr, cos_g))
             for j in range(nlanes):
                 L[pi, j] += thr[pi, j] * w * lerp(s_emit, er, li[pi, j], lf[pi, j])
         if depth + 1 >= max_depth:
@@ -863,7 +887,15 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             is_env = s_l_kind[k] == ENV
             d_l = 1.0  # the Doppler factor the light's spectrum is looked up with
             r_l = 0.0  # a moving light's rest-frame distance
-            if moving:  # lights are sampled in the lab, from the hit's lab point
+            # a light of the very body (segment) the vertex is on: both rest in its frame,
+            # no Doppler factor between them; sampled as in a static scene
+            same_body = moving and ls == sg
+            if same_body:
+                wi, p_l, scale, delta, finite, target, ok = sample_light(
+                    light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, p[0], p[1], p[2], eps)
+                ok, kd, km, s, c = nee_factors(wo, wi, nrm, g, p_l, scale, delta, ok, wd, wm,
+                                               a2)
+            elif moving:  # lights are sampled in the lab, from the hit's lab point
                 eps_l = ray_offset_at(s_eps, pl[0], pl[1], pl[2])
                 if is_env:
                     wi, p_l, scale, delta, finite, target, ok = env_light_sample(
@@ -879,7 +911,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                                                                -sh[1], -sh[2], sb, sig)
                 d_out = 1.0 / inv_dout
                 d_l = d_out
-                # (a moving light is not sampled from a moving vertex: BSDF sampling only)
+                # (a light of another moving body is not sampled from a moving vertex: BSDF
+                # sampling only)
                 ok, kd, km, s, c = nee_factors(wo, (wux, wuy, wuz), nrm, g,
                                                p_l * d_out * d_out, scale, delta, ok and ls < 0,
                                                wd, wm, a2)
@@ -941,7 +974,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 n_nee += 1
             elif ok:
                 row = s_l_row[k]
-                if moving or ls >= 0:  # the light's spectrum at D_l λ, times D_l⁵: at a
+                if not same_body and (moving or ls >= 0):  # the light's spectrum at D_l λ,
+                    # times D_l⁵: at a
                     # moving vertex D_l = D_out (λ_lab′ = D_out λ_rest), towards a moving
                     # light D_l = D_e (λ_rest = D_e λ_lab)
                     lshift = math.log(d_l) * INV_DLOG if s_shift else 0.0
@@ -969,8 +1003,13 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                     for j in range(nlanes):
                         sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
                             * e_val[pi, j]
-                    so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
-                    sh_t0[n_sh] = t_ev
+                    if same_body:
+                        so, sd, st, dt_o = body_shadow_ray(p, pl, g, eps, target, sh, sb, sig,
+                                                           sgam, scg)
+                        sh_t0[n_sh] = t_ev + dt_o
+                    else:
+                        so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
+                        sh_t0[n_sh] = t_ev
                 sh_idx[n_sh] = pi
                 sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = so[0], so[1], so[2]
                 sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = sd[0], sd[1], sd[2]

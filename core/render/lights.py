@@ -19,8 +19,10 @@ emissive triangle of a moving object with one inertial segment (a constant veloc
 a triangle light whose ``seg`` names that segment: next-event estimation samples it in
 the object's rest frame from the shading event seen there (the light-travel time is then
 the rest-frame distance), and turns the direction, the pdf and the spectrum into the lab
-(integrator.shade; physics.md, "Emitters on moving objects"). Emitters on worldlines of
-several segments are reached by BSDF sampling only.
+(integrator.shade; physics.md, "Emitters on moving objects"); from a shading point on
+the same segment's body both rest in that frame, and it is sampled there as in a static
+scene. Emitters on worldlines of several segments, and those of another moving body seen
+from a moving one, are reached by BSDF sampling only.
 Spectral shapes are rows of :class:`materials.SpectralTables` ``emit``.
 
 :func:`sample_light` draws the direction to a light as the table says (from the
