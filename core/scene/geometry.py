@@ -566,10 +566,12 @@ def scene_from_parts(
                     "extent %.3g): float32 rays cannot resolve them; they may render "
                     "wrongly (see README, Numerical limits)", unresolved,
                     ray_offset(extent), RAY_OFFSET_REL, extent)
+    # writable C arrays: a read-only view (a caller's array passed through) would be
+    # another type for the compiled kernels, compiled again instead of read from the cache
     return Scene(
-        triangles=np.ascontiguousarray(triangles, dtype=np.float64),
-        normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
-        material_ids=np.ascontiguousarray(material_ids, dtype=np.int32),
+        triangles=np.require(triangles, np.float64, ["C", "W"]),
+        normals=None if normals is None else np.require(normals, np.float32, ["C", "W"]),
+        material_ids=np.require(material_ids, np.int32, ["C", "W"]),
         materials=materials,
         lights=kept_lights,
         background=np.array(background, dtype=np.float64),
@@ -581,7 +583,7 @@ def scene_from_parts(
         light_triangles=light_triangles,
         environment=environment,
         uvs=np.zeros((len(triangles), 3, 2), np.float32) if uvs is None else
-        np.ascontiguousarray(uvs, dtype=np.float32),
+        np.require(uvs, np.float32, ["C", "W"]),
     )
 
 
@@ -634,10 +636,11 @@ def _concatenate(parts: list[_Part]
     parts = [p for p in parts if len(p.triangles)]
     if not parts:
         return np.zeros((0, 3, 3)), None, np.zeros(0, dtype=np.int32), None
-    if len(parts) == 1:  # a single mesh: no copy
+    if len(parts) == 1:  # a single mesh: its arrays as they are (only the ids are new)
         p = parts[0]
-        return (p.triangles, p.normals, np.broadcast_to(
-            np.asarray(p.material_id, dtype=np.int32), (len(p.triangles),)), p.uvs)
+        ids = np.empty(len(p.triangles), np.int32)
+        ids[:] = p.material_id
+        return p.triangles, p.normals, ids, p.uvs
     triangles = np.concatenate([p.triangles for p in parts])
     ids = np.concatenate([np.broadcast_to(np.asarray(p.material_id, dtype=np.int32),
                                           (len(p.triangles),)) for p in parts])
