@@ -30,6 +30,7 @@ from relray.bench import common as cm
 from relray.bench.velocity_groups import grouped_scene
 from relray.core.physics.relativity import aberrate_doppler_ray
 from relray.core.render import embree
+from relray.core.scene.worldlines import spatial_boost
 
 FAR = np.float32(3e38)
 
@@ -89,7 +90,7 @@ def _rest_forms(tracer, lab: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.
     b = float(np.linalg.norm(u))
     h = u / b
     g = 1.0 / np.sqrt(1.0 - b * b)
-    rest_pt = lab + (g * g / (g + 1.0)) * (lab @ u)[:, None] * u
+    rest_pt = spatial_boost(u, lab)
     rest = np.empty((len(d), 7), np.float32)
     rest[:, :3] = rest_pt - tracer.groups[0].accel.origin
     dd = d.astype(np.float64)
