@@ -476,13 +476,16 @@ def test_sampler_pdf_matches_its_histogram_and_integrates_to_one():
     rng = np.random.default_rng(1)
     n = 200_000
     u = rng.random((n, 2))
-    dirs, pdfs = sample_many(ke, u)
+    dirs, pdfs, texel = sample_many(ke, u)
     assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-9)
     back = np.array([pdf_at(ke, d) for d in dirs[:2000]])
     assert np.allclose(back, pdfs[:2000], rtol=1e-6)
     uv = np.array([uv_of(d, 40.0) for d in dirs])
     rr = np.minimum((uv[:, 1] * 6).astype(int), 5)
     cc = np.minimum((uv[:, 0] * 12).astype(int), 11)
+    # the texel the sampler reports is the one its direction lies in (up to rounding on
+    # a texel's edge)
+    assert np.mean((texel[:, 0] == rr) & (texel[:, 1] == cc)) > 0.9999
     counts = np.zeros((6, 12))
     np.add.at(counts, (rr, cc), 1)
     p = ke.pmf.astype(float)
@@ -506,11 +509,13 @@ def uv_of(d, rot_deg):
 def sample_many(ke, u):
     out = np.zeros((len(u), 3))
     pdf = np.zeros(len(u))
+    texel = np.zeros((len(u), 2), int)
     for i, (a, b) in enumerate(u):
-        w, p = environment.env_sample(ke.marg, ke.cond, ke.pmf, ke.rot, a, b)
+        w, p, r, c = environment.env_sample(ke.marg, ke.cond, ke.pmf, ke.rot, a, b)
         out[i] = w
         pdf[i] = p
-    return out, pdf
+        texel[i] = r, c
+    return out, pdf, texel
 
 
 def pdf_at(ke, d):
@@ -529,8 +534,8 @@ def test_bilinear_lookup_of_the_map_seen_directly():
     def value(u, v):
         d = direction_of(u, v)
         q = environment.env_bilinear(ke.tex, ke.rot, *d)
-        return np.array([environment.env_lane_bilinear(ke.tex, q, j, True, 0.0, 1.0, ke.nm)
-                         for j in range(3)])
+        return np.array(environment.env_lanes_bilinear(ke.tex, q, True, ke.nm, (0.0,) * 4,
+                                                       (1.0,) * 4)[:3])
 
     assert np.allclose(value(2.5 / 8, 1.5 / 4), rgb[1, 2], atol=1e-4)
     assert np.allclose(value(3.0 / 8, 1.5 / 4), 0.5 * (rgb[1, 2] + rgb[1, 3]), atol=1e-4)
@@ -538,7 +543,7 @@ def test_bilinear_lookup_of_the_map_seen_directly():
     assert np.allclose(value(4.5 / 8, 0.95), rgb[3, 4], atol=1e-4)
     assert np.allclose(value(4.5 / 8, 0.3 / 4), rgb[0, 4], atol=1e-4)
     d = direction_of(5.2 / 8, 2.9 / 4)
-    r, c = environment.env_texel(ke.tex, ke.rot, *d)
+    r, c, _ = environment.env_texel_pdf(ke.pmf, ke.rot, *d)
     assert (r, c) == (2, 5)
 
 

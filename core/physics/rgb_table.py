@@ -51,6 +51,8 @@ from ..resources import usable_cores
 from . import sigmoid as _sig
 from .spectrum import INV_DLOG, LOG_GRID_MIN, SIGMOID_BAND_NM, reflectance_fit_model
 
+_DLOG = 1.0 / INV_DLOG  # the grid's step in ln λ (a product in the kernels, not a quotient)
+
 RES = 64
 #: Greys are clamped to reflectances in [GREY_EPS, 1 - GREY_EPS] (|c2| ≤ C_MAX ≈ 500)
 GREY_EPS = 1e-6
@@ -290,7 +292,7 @@ def sigmoid_reflectance(c0, c1, c2, lam_nm):
 def lambda_of_column(u):
     """λ in nm of the fractional column u of :mod:`.spectrum`'s log-spaced lab grid
     (the kernels' ``lamu``): exp(ln λ_min + u / INV_DLOG)."""
-    return math.exp(LOG_GRID_MIN + u / INV_DLOG)
+    return math.exp(LOG_GRID_MIN + u * _DLOG)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

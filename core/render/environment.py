@@ -79,6 +79,8 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance weights
 #: radiance (× Ȳ), so bands outside the visible are sampled (module docstring).
 SPECTRAL_FLOOR = 0.01
 TWO_PI_SQ = 2.0 * math.pi * math.pi
+INV_PI = 1.0 / math.pi
+INV_TWO_PI = 0.5 / math.pi
 
 
 class KernelEnvironment(NamedTuple):
@@ -233,8 +235,8 @@ def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> K
 def direction_to_uv(x, y, z, rot):
     """Map coordinates (u, v) ∈ [0, 1)² × [0, 1] of the unit lab direction (x, y, z)."""
     cz = min(max(np.float64(z), -1.0), 1.0)
-    v = 1.0 - math.acos(cz) / math.pi
-    u = (math.pi + rot - math.atan2(np.float64(y), np.float64(x))) / (2.0 * math.pi)
+    v = 1.0 - math.acos(cz) * INV_PI
+    u = (math.pi + rot - math.atan2(np.float64(y), np.float64(x))) * INV_TWO_PI
     return u - math.floor(u), v
 
 
@@ -245,14 +247,6 @@ def uv_to_direction(u, v, rot):
     phi = math.pi + rot - 2.0 * math.pi * u
     st = math.sin(theta)
     return (st * math.cos(phi), st * math.sin(phi), math.cos(theta)), st
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def env_texel(tex, rot, x, y, z):
-    """(row, column) of the texel the lab direction (x, y, z) sees."""
-    h, w = tex.shape[0], tex.shape[1]
-    u, v = direction_to_uv(x, y, z, rot)
-    return min(int(v * h), h - 1), min(int(u * w), w - 1)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -272,29 +266,60 @@ def env_bilinear(tex, rot, x, y, z):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def env_lane_bilinear(tex, q, j, rgb, lamu, base, nm):
-    """:func:`env_lane` interpolated over the texels ``q`` of :func:`env_bilinear`."""
-    r0, r1, c0, c1, fy, fx = q
-    a = (1.0 - fx) * env_lane(tex, r0, c0, j, rgb, lamu, base, nm) \
-        + fx * env_lane(tex, r0, c1, j, rgb, lamu, base, nm)
-    b = (1.0 - fx) * env_lane(tex, r1, c0, j, rgb, lamu, base, nm) \
-        + fx * env_lane(tex, r1, c1, j, rgb, lamu, base, nm)
-    return (1.0 - fy) * a + fy * b
+def env_lanes(tex, r, c, rgb, nm, lamu, base):
+    """Texel (r, c)'s radiance for the four lanes, a 4-tuple: rgb mode its channels
+    (the fourth 0), a spectral map (``nm`` not empty) its bands interpolated at each
+    lane's lab wavelength λ, else k · s(λ; c) · E. ``lamu``: the lanes' table columns,
+    ``base``: E(λ) at them (the emission row), both 4-tuples. One call per lookup (a
+    compiled function's array arguments cost reference counts per call), each lane's
+    λ computed once."""
+    return _texel_lanes(tex, r, c, rgb, nm, _lane_lambdas(lamu, rgb), base)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def env_lane(tex, r, c, j, rgb, lamu, base, nm):
-    """The radiance of texel (r, c) for lane j: rgb mode its channel j, a spectral map
-    (``nm`` not empty) its bands interpolated at the lane's lab wavelength λ (table
-    column ``lamu``), else k · s(λ; c) · E with ``base`` = E(λ) (the emission row at
-    lamu)."""
+def env_lanes_bilinear(tex, q, rgb, nm, lamu, base):
+    """:func:`env_lanes` interpolated over the texels ``q`` of :func:`env_bilinear`:
+    (1−fy)((1−fx) L[r0,c0] + fx L[r0,c1]) + fy((1−fx) L[r1,c0] + fx L[r1,c1]) per lane."""
+    r0, r1, c0, c1, fy, fx = q
+    lam = _lane_lambdas(lamu, rgb)
+    a = _mix(_texel_lanes(tex, r0, c0, rgb, nm, lam, base),
+             _texel_lanes(tex, r0, c1, rgb, nm, lam, base), fx)
+    b = _mix(_texel_lanes(tex, r1, c0, rgb, nm, lam, base),
+             _texel_lanes(tex, r1, c1, rgb, nm, lam, base), fx)
+    return _mix(a, b, fy)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _mix(a, b, f):
+    """(1 − f) a + f b per lane of two 4-tuples."""
+    g = 1.0 - f
+    return (g * a[0] + f * b[0], g * a[1] + f * b[1], g * a[2] + f * b[2], g * a[3] + f * b[3])
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _lane_lambdas(lamu, rgb):
+    """λ (nm) of the four lanes' table columns (rgb lanes: unused zeros)."""
     if rgb:
-        return np.float64(tex[r, c, j])
+        return (0.0, 0.0, 0.0, 0.0)
+    return (lambda_of_column(lamu[0]), lambda_of_column(lamu[1]),
+            lambda_of_column(lamu[2]), lambda_of_column(lamu[3]))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _texel_lanes(tex, r, c, rgb, nm, lam, base):
+    """:func:`env_lanes` of texel (r, c) at the lanes' wavelengths ``lam`` (nm)."""
+    if rgb:
+        return (np.float64(tex[r, c, 0]), np.float64(tex[r, c, 1]), np.float64(tex[r, c, 2]),
+                0.0)
     if nm.shape[0] > 0:
-        return band_value(tex, r, c, nm, lambda_of_column(lamu))
-    return (np.float64(tex[r, c, 3]) * base
-            * sigmoid_reflectance(tex[r, c, 0], tex[r, c, 1], tex[r, c, 2],
-                                  lambda_of_column(lamu)))
+        return (band_value(tex, r, c, nm, lam[0]), band_value(tex, r, c, nm, lam[1]),
+                band_value(tex, r, c, nm, lam[2]), band_value(tex, r, c, nm, lam[3]))
+    k = np.float64(tex[r, c, 3])
+    c0, c1, c2 = tex[r, c, 0], tex[r, c, 1], tex[r, c, 2]
+    return (k * base[0] * sigmoid_reflectance(c0, c1, c2, lam[0]),
+            k * base[1] * sigmoid_reflectance(c0, c1, c2, lam[1]),
+            k * base[2] * sigmoid_reflectance(c0, c1, c2, lam[2]),
+            k * base[3] * sigmoid_reflectance(c0, c1, c2, lam[3]))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -310,16 +335,23 @@ def band_value(tex, r, c, nm, lam):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def env_texel_pdf(pmf, rot, x, y, z):
+    """(row, column, :func:`env_pdf`) of the lab direction (x, y, z): the texel it sees
+    and the solid-angle density there, from one (u, v)."""
+    h, w = pmf.shape[0], pmf.shape[1]
+    u, v = direction_to_uv(x, y, z, rot)
+    r, c = min(int(v * h), h - 1), min(int(u * w), w - 1)
+    st = math.sqrt(max(0.0, 1.0 - min(max(np.float64(z), -1.0), 1.0) ** 2))
+    if st <= 0.0:
+        return r, c, 0.0
+    return r, c, np.float64(pmf[r, c]) * h * w / (TWO_PI_SQ * st)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def env_pdf(pmf, rot, x, y, z):
     """Solid-angle density of :func:`env_sample` at the lab direction (x, y, z):
     p_t H W / (2π² sin θ) (0 at the poles)."""
-    h, w = pmf.shape[0], pmf.shape[1]
-    u, v = direction_to_uv(x, y, z, rot)
-    st = math.sqrt(max(0.0, 1.0 - min(max(np.float64(z), -1.0), 1.0) ** 2))
-    if st <= 0.0:
-        return 0.0
-    return np.float64(pmf[min(int(v * h), h - 1), min(int(u * w), w - 1)]) * h * w / (
-        TWO_PI_SQ * st)
+    return env_texel_pdf(pmf, rot, x, y, z)[2]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -334,8 +366,9 @@ def _pick(cdf, u):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def env_sample(marg, cond, pmf, rot, u1, u2):
-    """A lab direction drawn ∝ texel power (module docstring) and its solid-angle pdf
-    (0 when it fell on a pole: then refuse the sample)."""
+    """A lab direction drawn ∝ texel power (module docstring), its solid-angle pdf (0
+    when it fell on a pole: then refuse the sample) and the texel (row, column) it lies
+    in."""
     h, w = pmf.shape[0], pmf.shape[1]
     r, fv = _pick(marg, u1)
     c, fu = _pick(cond[r], u2)
@@ -343,14 +376,16 @@ def env_sample(marg, cond, pmf, rot, u1, u2):
     pdf = 0.0
     if st > 0.0:
         pdf = np.float64(pmf[r, c]) * h * w / (TWO_PI_SQ * st)
-    return wi, pdf
+    return wi, pdf, r, c
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def env_light_sample(marg, cond, pmf, rot, p_sel, u1, u2):
     """Next-event estimation towards the map, picked with probability ``p_sel``: the
     tuple of :func:`.lights.sample_light` (wi, p_sel · pdf, scale 1, not delta, at
-    infinity, no target, accepted when the pdf is positive)."""
-    wi, pdf = env_sample(marg, cond, pmf, rot, u1, u2)
+    infinity, accepted when the pdf is positive); a light at infinity has no target
+    point, so the target slot carries the sampled texel, (row, column, 0), for
+    :func:`env_lanes` (no second lookup of wi's texel)."""
+    wi, pdf, r, c = env_sample(marg, cond, pmf, rot, u1, u2)
     p_l = p_sel * pdf
-    return wi, p_l, 1.0, False, False, (0.0, 0.0, 0.0), p_l > 0.0
+    return wi, p_l, 1.0, False, False, (np.float64(r), np.float64(c), 0.0), p_l > 0.0

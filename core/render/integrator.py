@@ -93,11 +93,10 @@ from .embree import occluded1, rayhit_buffer
 from .environment import (
     KernelEnvironment,
     env_bilinear,
-    env_lane,
-    env_lane_bilinear,
+    env_lanes,
+    env_lanes_bilinear,
     env_light_sample,
-    env_pdf,
-    env_texel,
+    env_texel_pdf,
     kernel_environment,
 )
 from .lights import (
@@ -699,27 +698,28 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             elif s_env_on and (depth > 0 or sky_seen):
                 # the map at the ray's lab direction (a ray that left a moving body was
                 # turned back into the lab there: lab direction, lab lanes)
-                w = 1.0
-                if depth > 0 and prev_delta[pi] == 0 and s_sky_pmf > 0.0:
-                    w = power_heuristic(prev_pdf[pi],
-                                        s_sky_pmf * env_pdf(s_env_pmf, s_env_rot, dx, dy, dz))
+                lu4 = (np.float64(lamu[pi, 0]), np.float64(lamu[pi, 1]),
+                       np.float64(lamu[pi, 2]), np.float64(lamu[pi, 3]))
+                e4 = (np.float64(lerp(s_emit, s_env_row, li[pi, 0], lf[pi, 0])),
+                      np.float64(lerp(s_emit, s_env_row, li[pi, 1], lf[pi, 1])),
+                      np.float64(lerp(s_emit, s_env_row, li[pi, 2], lf[pi, 2])),
+                      np.float64(lerp(s_emit, s_env_row, li[pi, 3], lf[pi, 3]))
+                      if nlanes == 4 else 0.0)
                 if prev_delta[pi] == 1:  # seen directly or through a delta bounce:
                     # bilinear (no light sampling to agree with; environment.py)
-                    q_e = env_bilinear(s_env_tex, s_env_rot, dx, dy, dz)
+                    v4 = env_lanes_bilinear(s_env_tex, env_bilinear(s_env_tex, s_env_rot, dx,
+                                                                    dy, dz),
+                                            rgb_lanes, s_env_nm, lu4, e4)
                     for j in range(nlanes):
-                        L[pi, j] += thr[pi, j] * env_lane_bilinear(
-                            s_env_tex, q_e, j, rgb_lanes, np.float64(lamu[pi, j]),
-                            np.float64(lerp(s_emit, s_env_row, li[pi, j], lf[pi, j])),
-                            s_env_nm)
+                        L[pi, j] += thr[pi, j] * v4[j]
                 else:
-                    # (float64 arguments, exactly the float32 values, as next-event
-                    # estimation passes: one compiled env_lane for both)
-                    r_e, c_e = env_texel(s_env_tex, s_env_rot, dx, dy, dz)
+                    r_e, c_e, p_e = env_texel_pdf(s_env_pmf, s_env_rot, dx, dy, dz)
+                    w = 1.0
+                    if depth > 0 and s_sky_pmf > 0.0:
+                        w = power_heuristic(prev_pdf[pi], s_sky_pmf * p_e)
+                    v4 = env_lanes(s_env_tex, r_e, c_e, rgb_lanes, s_env_nm, lu4, e4)
                     for j in range(nlanes):
-                        L[pi, j] += thr[pi, j] * w * env_lane(
-                            s_env_tex, r_e, c_e, j, rgb_lanes, np.float64(lamu[pi, j]),
-                            np.float64(lerp(s_emit, s_env_row, li[pi, j], lf[pi, j])),
-                            s_env_nm)
+                        L[pi, j] += thr[pi, j] * w * v4[j]
             continue
         # ---- a moving body: the rest of the bounce happens in its rest frame S_u
         t_ev = rt[i] - t_hit[i]  # the hit's lab time
@@ -952,12 +952,17 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 lshift = math.log(d_l) * INV_DLOG if s_shift else 0.0
                 if s_beam:
                     c *= d_l * d_l * d_l * d_l * d_l
-                r_e, c_e = env_texel(s_env_tex, s_env_rot, wi[0], wi[1], wi[2])
+                r_e, c_e = int(target[0]), int(target[1])  # the sampled texel
+                lu4 = (lamu[pi, 0] + lshift, lamu[pi, 1] + lshift, lamu[pi, 2] + lshift,
+                       lamu[pi, 3] + lshift if nlanes == 4 else 0.0)
+                v4 = env_lanes(s_env_tex, r_e, c_e, rgb_lanes, s_env_nm, lu4,
+                               (lerp_at(s_emit, s_env_row, lu4[0], top),
+                                lerp_at(s_emit, s_env_row, lu4[1], top),
+                                lerp_at(s_emit, s_env_row, lu4[2], top),
+                                lerp_at(s_emit, s_env_row, lu4[3], top)
+                                if nlanes == 4 else 0.0))
                 for j in range(nlanes):
-                    lu = lamu[pi, j] + lshift
-                    sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c \
-                        * env_lane(s_env_tex, r_e, c_e, j, rgb_lanes, lu,
-                                   lerp_at(s_emit, s_env_row, lu, top), s_env_nm)
+                    sh_c[n_sh, j] = thr[pi, j] * lane_value(kd, km, s, rho_j[j]) * c * v4[j]
                 if moving:
                     so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
                     so, sd, st = shadow_ray_from(so, target, wi, False)
