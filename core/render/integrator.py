@@ -494,12 +494,11 @@ def body_shadow_ray(p, pl, g, eps, target, h, b, ig, gam, cg):
     +u, :func:`.relativity.aberrate_doppler_ray`) and the lab length r (1 - 1e-4) / D_out,
     D_out = 1/(γ (1 - u·w)) = s_u/s_lab. Returns (origin, unit direction, length, the lab
     time to add to the hit's)."""
-    o_r = offset_point(p, g, eps, 1.0)
-    rx, ry, rz = target[0] - o_r[0], target[1] - o_r[1], target[2] - o_r[2]
-    r = math.sqrt(rx * rx + ry * ry + rz * rz)
-    wx, wy, wz, d_out = aberrate_doppler_ray(rx / r, ry / r, rz / r, h[0], h[1], h[2], b, ig)
+    _, w, length = shadow_ray_from(offset_point(p, g, eps, 1.0), target, (0.0, 0.0, 0.0),
+                                   True)
+    wx, wy, wz, d_out = aberrate_doppler_ray(w[0], w[1], w[2], h[0], h[1], h[2], b, ig)
     so, dt_o = lab_offset(pl, g, eps, 1.0, h, b, gam, cg)
-    return so, (wx, wy, wz), r * (1.0 - 1e-4) / d_out, dt_o
+    return so, (wx, wy, wz), length / d_out, dt_o
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

@@ -274,7 +274,8 @@ class MovingScene:
             buf.clear()
             buf.update(n=n, best=np.empty(n, np.float32), seg=np.empty(n, np.int32),
                        prim=np.empty(n, np.int32), u=np.empty(n, np.float32),
-                       v=np.empty(n, np.float32), blocked=np.empty(n, bool))
+                       v=np.empty(n, np.float32), blocked=np.empty(n, bool),
+                       no_seg=np.full(n, -1, np.int32))
         return buf
 
     def intersect(self, o: np.ndarray, d: np.ndarray, t: np.ndarray,
@@ -291,7 +292,7 @@ class MovingScene:
         out = Hits(buf["best"][:n], buf["prim"][:n], buf["u"][:n], buf["v"][:n],
                    buf["seg"][:n])
         if seg is None:
-            seg, rest = np.full(n, -1, np.int32), _NO_REST
+            seg, rest = buf["no_seg"][:n], _NO_REST  # (read only by moving_hits)
         moving_hits(*self.query_args(), rayhit_buffer(), as_rays(o), as_rays(d),
                     np.ascontiguousarray(t, np.float64), seg, rest, out.t, out.prim, out.u,
                     out.v, out.seg)
@@ -314,9 +315,14 @@ class MovingScene:
         γ²/(γ + 1)) (S, 3) and its frame: t_ref (S,), p_ref in accelerator coordinates (S, 3),
         the origin of its group's BVH in rest-frame coordinates (S, 3)."""
         sf = self.segments.f
-        vec, one = (lambda a: np.ascontiguousarray(sf[:, a:a + 3])), (
-            lambda a: np.ascontiguousarray(sf[:, a]))
-        return vec(H), one(B), vec(IG), one(T_REF), vec(Q), vec(CEN)
+        return (_columns(sf, H, 3), _columns(sf, B), _columns(sf, IG, 3), _columns(sf, T_REF),
+                _columns(sf, Q, 3), _columns(sf, CEN, 3))
+
+
+def _columns(f: np.ndarray, a: int, width: int = 0) -> np.ndarray:
+    """Column ``a`` of ``f`` (S,), or its ``width`` columns from ``a`` (S, width), as a
+    contiguous array."""
+    return np.ascontiguousarray(f[:, a] if width == 0 else f[:, a:a + width])
 
 
 def static_query_args(static: Accel) -> tuple:
