@@ -6,11 +6,13 @@ core's interfaces change.
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from relray.bench import (
+    ab,
     common,
     convergence,
     cycles_anchor,
@@ -35,6 +37,19 @@ def test_metrics_and_interpolation():
     t, extrapolated = common.time_at_error([1, 4], [1, 0.25], 0.01)
     assert t == pytest.approx(100.0) and extrapolated
     assert cycles_anchor.cycles_bounces(8) == 6 and cycles_anchor.cycles_bounces(2) == 0
+
+
+def test_ab_pairs_a_revision_with_this_checkout(tmp_path):
+    """bench/ab.py: the paired ratio's median and quartiles; a revision unpacked from git
+    is a package tree; one worker process renders a scene and reports CPU ns per path."""
+    s = ab.paired_ratios([2.0, 3.0, 5.0, 4.0], [4.0, 4.0, 5.0, 2.0])
+    assert s["median"] == pytest.approx(0.875) and s["pairs"] == 4
+    assert s["q1"] <= s["median"] <= s["q3"]
+    here = Path(ab.__file__).resolve().parents[1]
+    tree = ab.unpack("HEAD", here, tmp_path / "rev")
+    assert (tree / "core" / "render" / "integrator.py").is_file()
+    ns = ab.ns_per_path(here, "cornell", 1, 8, 1, tmp_path / "scenes")
+    assert 0.0 < ns < 1e9
 
 
 def test_toml_writer_round_trips_the_presets():
