@@ -138,7 +138,7 @@ def prepare(scene: Scene, mode: str, env_nee: bool = True) -> PreparedScene:
     segments = None
     if groups:
         tracer = MovingScene(accel, groups, origin)
-        segments = tracer.segment_table()
+        segments = tracer.segments.f
         radius = math.inf
     elif accel is None:  # nothing but area lights: every ray escapes (no BVH, no group)
         tracer = MovingScene(None, [], origin)

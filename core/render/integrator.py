@@ -109,7 +109,15 @@ from .lights import (
     triangle_light_pdf,
 )
 from .materials import SpectralTables
-from .rest_frames import MovingScene, blocked_ray, static_query_args
+from .rest_frames import CEN as SEG_CEN
+from .rest_frames import IG as SEG_IG
+from .rest_frames import SEG_COLUMNS, MovingScene, blocked_ray, static_query_args
+from .rest_frames import T_REF as SEG_T_REF
+from .rest_frames import B as SEG_B
+from .rest_frames import C as SEG_C
+from .rest_frames import G as SEG_G
+from .rest_frames import H as SEG_H
+from .rest_frames import Q as SEG_Q
 from .sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -180,12 +188,12 @@ class KernelScene(NamedTuple):
     sky_pmf: float
     sky_row: int
     eps: float
-    seg_h: np.ndarray   # float64 (S, 3): per moving segment, the unit direction of u
-    seg_b: np.ndarray   # float64 (S,): |u|
-    seg_lz: np.ndarray  # float64 (S, 3): 1/γ_u, γ_u, γ_u²/(γ_u + 1)
-    seg_tref: np.ndarray  # float64 (S,): the lab time of its frame's origin event
-    seg_q: np.ndarray     # float64 (S, 3): its frame's origin (accelerator coordinates)
-    seg_org: np.ndarray   # float64 (S, 3): its group BVH's origin (rest-frame coordinates)
+    # float64 (S, SEG_COLUMNS): per moving segment its row of the segment table
+    # (:class:`.rest_frames.SegmentTable` ``f``, the one the tracer reads): u's unit
+    # direction (columns SEG_H…+2), |u| (SEG_B), 1/γ_u, γ_u, γ_u²/(γ_u + 1) (SEG_IG, SEG_G,
+    # SEG_C), its frame's origin event (SEG_T_REF; SEG_Q…+2, accelerator coordinates), its
+    # group BVH's origin (SEG_CEN…+2, rest-frame coordinates)
+    seg_f: np.ndarray
     l_seg: np.ndarray     # int32 (K,): a moving triangle light's segment, else -1
     shift: bool         # bodies shift wavelengths (``doppler``, not rgb)
     beam: bool          # bodies apply D⁵ (``searchlight``)
@@ -258,20 +266,20 @@ class ShadowRays(NamedTuple):
 def kernel_scene(extent: float, normals: np.ndarray | None,
                  material_ids: np.ndarray, tables: SpectralTables, lights: LightTable,
                  geometry: dict[str, np.ndarray],
-                 segments: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                 segments: np.ndarray | None = None,
                  area_tris: np.ndarray | None = None,
                  env: KernelEnvironment | None = None,
                  textures: TextureTable | None = None) -> KernelScene:
     """Pack the scene for the kernels (``extent``: the largest BVH's, for the ray offset;
-    ``segments``: :meth:`.rest_frames.MovingScene.segment_table`; ``area_tris``: the
+    ``segments``: the moving segments' table rows (:class:`.rest_frames.SegmentTable`
+    ``f``), None: none; ``area_tris``: the
     triangles of area lights, which are in no BVH: :func:`cross_area_lights`; ``env``:
     the environment map's tables, None for none; ``textures``:
     :func:`.textures.build_textures`, None: no material has a texture)."""
     if env is None:
         env = kernel_environment(None, "rgb", 0)
-    if segments is None:
-        segments = (np.zeros((0, 3)), np.zeros(0), np.ones((0, 3)), np.zeros(0), np.zeros((0, 3)),
-                    np.zeros((0, 3)))
+    seg_f = (np.zeros((0, SEG_COLUMNS)) if segments is None
+             else np.ascontiguousarray(segments, np.float64))
     l_seg = (lights.seg if lights.seg is not None
              else np.full(len(lights.kind), -1, np.int32))
     vn = (np.zeros((1, 3, 3), np.float32) if normals is None
@@ -285,7 +293,7 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
         tables.mat_weights, tables.mat_alpha, tables.mat_ior, tables.mat_emit_row,
         tables.mat_one_sided, lights.kind, lights.prim, lights.pos, lights.dir, lights.row,
         lights.scale, lights.spot, lights.cdf, lights.tri_pmf, float(lights.sky_pmf),
-        int(lights.sky_row), ray_offset(extent), *segments, l_seg, False, False,
+        int(lights.sky_row), ray_offset(extent), seg_f, l_seg, False, False,
         np.zeros(0, np.int32) if area_tris is None else np.ascontiguousarray(area_tris,
                                                                              np.int32),
         mat_rgb, bool(env.on), np.ascontiguousarray(env.tex, np.float32),
@@ -477,7 +485,7 @@ def lab_offset(pl, g, eps, side, h, b, gam, cg):
     """The lab event of a point of a moving body offset off its surface: the rest-frame
     displacement y = ε · side · g (S_u) from the lab hit point ``pl`` is the lab
     displacement Λ(-u)(0, y) = (γ u·y, y + γ²/(γ+1) (u·y) u), u = b h, ``gam`` = γ,
-    ``cg`` = γ²/(γ+1) (``KernelScene.seg_lz``). Returns (the lab point, the lab time to
+    ``cg`` = γ²/(γ+1) (``KernelScene.seg_f``). Returns (the lab point, the lab time to
     add)."""
     yx, yy, yz = g[0] * eps * side, g[1] * eps * side, g[2] * eps * side
     uy = b * (h[0] * yx + h[1] * yy + h[2] * yz)
@@ -648,7 +656,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
     (s_v0, s_e1, s_e2, s_ng, s_area, s_vn, s_has_vn, s_tri_mat, s_refl, s_emit, s_mat_w,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
-     s_eps, s_seg_h, s_seg_b, s_seg_lz, s_seg_tref, s_seg_q, s_seg_org, s_l_seg, s_shift,
+     s_eps, s_seg, s_l_seg, s_shift,
      s_beam, _, s_mat_rgb, s_env_on, s_env_tex, s_env_marg, s_env_cond, s_env_pmf, s_env_rot,
      s_env_row, s_env_nm, s_tex) = sc
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
@@ -728,9 +736,9 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         d_out = 1.0
         pl = (o[i, 0], o[i, 1], o[i, 2])
         if moving:
-            sh = (s_seg_h[sg, 0], s_seg_h[sg, 1], s_seg_h[sg, 2])
-            sb = s_seg_b[sg]
-            sig, sgam, scg = s_seg_lz[sg, 0], s_seg_lz[sg, 1], s_seg_lz[sg, 2]
+            sh = (s_seg[sg, SEG_H], s_seg[sg, SEG_H + 1], s_seg[sg, SEG_H + 2])
+            sb = s_seg[sg, SEG_B]
+            sig, sgam, scg = s_seg[sg, SEG_IG], s_seg[sg, SEG_G], s_seg[sg, SEG_C]
             pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
             if r_seg[i] == sg:
                 # back on a body of the segment the ray left: its rest-frame direction is
@@ -916,12 +924,14 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                                                p_l * d_out * d_out, scale, delta, ok and ls < 0,
                                                wd, wm, a2)
             elif ls >= 0:  # a moving triangle light, sampled in its rest frame
-                lh = (s_seg_h[ls, 0], s_seg_h[ls, 1], s_seg_h[ls, 2])
-                lb = s_seg_b[ls]
-                lig = s_seg_lz[ls, 0]
-                xr = to_rest(p, t_ev, lh, lb, s_seg_lz[ls, 1], s_seg_lz[ls, 2], s_seg_tref[ls],
-                             (s_seg_q[ls, 0], s_seg_q[ls, 1], s_seg_q[ls, 2]),
-                             (s_seg_org[ls, 0], s_seg_org[ls, 1], s_seg_org[ls, 2]))
+                lh = (s_seg[ls, SEG_H], s_seg[ls, SEG_H + 1], s_seg[ls, SEG_H + 2])
+                lb = s_seg[ls, SEG_B]
+                lig = s_seg[ls, SEG_IG]
+                xr = to_rest(p, t_ev, lh, lb, s_seg[ls, SEG_G], s_seg[ls, SEG_C],
+                             s_seg[ls, SEG_T_REF],
+                             (s_seg[ls, SEG_Q], s_seg[ls, SEG_Q + 1], s_seg[ls, SEG_Q + 2]),
+                             (s_seg[ls, SEG_CEN], s_seg[ls, SEG_CEN + 1],
+                              s_seg[ls, SEG_CEN + 2]))
                 wr, p_r, scale, delta, finite, target, ok = sample_light(
                     light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, xr[0], xr[1], xr[2],
                     eps)

@@ -310,20 +310,6 @@ class MovingScene:
                        np.ascontiguousarray(t, np.float64), blocked)
         return blocked
 
-    def segment_table(self) -> tuple[np.ndarray, ...]:
-        """For the kernels, per segment: unit direction of u (S, 3), |u| (S,), (1/γ, γ,
-        γ²/(γ + 1)) (S, 3) and its frame: t_ref (S,), p_ref in accelerator coordinates (S, 3),
-        the origin of its group's BVH in rest-frame coordinates (S, 3)."""
-        sf = self.segments.f
-        return (_columns(sf, H, 3), _columns(sf, B), _columns(sf, IG, 3), _columns(sf, T_REF),
-                _columns(sf, Q, 3), _columns(sf, CEN, 3))
-
-
-def _columns(f: np.ndarray, a: int, width: int = 0) -> np.ndarray:
-    """Column ``a`` of ``f`` (S,), or its ``width`` columns from ``a`` (S, width), as a
-    contiguous array."""
-    return np.ascontiguousarray(f[:, a] if width == 0 else f[:, a:a + width])
-
 
 def static_query_args(static: Accel) -> tuple:
     """:meth:`MovingScene.query_args` of a static scene: its handle and box, no segment."""
