@@ -7,8 +7,8 @@ A change's speed-up, measured the way this shared, noisy machine allows: ``REV``
 git revision) is unpacked with ``git archive`` into a temporary folder (its kernels get
 their own numba cache entries, keyed by file path: its first run compiles them), then
 each round runs one process of each tree, the order alternating from round to round.
-A process renders the scene (:func:`.profile_scenes.scene_benches`: cornell, heavy,
-environment, textured, moving; ``size``², ``spp``, 1 thread) ``reps`` times after one
+A process builds and renders the scene (:func:`.profile_scenes.scene_bench`: cornell,
+heavy, environment, textured, moving; ``size``², ``spp``, 1 thread) ``reps`` times after one
 untimed render and prints its fastest process CPU time per path (of the render call:
 :class:`.common.RelrayBench`). The result is the
 median over the rounds of (this ÷ revision) with its quartiles: a paired ratio, so a
@@ -26,14 +26,18 @@ import tempfile
 from pathlib import Path
 
 #: The worker, run with a tree's parent on PYTHONPATH: only what every revision since the
-#: per-scene profile has (``profile_scenes.scene_benches``, ``RelrayBench.render``).
+#: per-scene profile has (``RelrayBench.render``; ``profile_scenes.scene_bench``, or in
+#: revisions older than it ``scene_benches``, which builds every scene).
 WORKER = """
 import sys, time
 from pathlib import Path
 from relray.bench import profile_scenes
 scene, spp, size, reps, tmp = sys.argv[1], *map(int, sys.argv[2:5]), Path(sys.argv[5])
-# (every scene is built; the heavy one with its million triangles only when it is asked)
-bench = profile_scenes.scene_benches(tmp, 1_000_000 if scene == "heavy" else 2000)[scene]
+heavy = 1_000_000 if scene == "heavy" else 2000
+if hasattr(profile_scenes, "scene_bench"):
+    bench = profile_scenes.scene_bench(scene, tmp, heavy)
+else:
+    bench = profile_scenes.scene_benches(tmp, heavy)[scene]
 bench.render(spp=1, width=16, height=16, threads=1)
 best = min(bench.render(spp=spp, width=size, height=size, threads=1).cpu
            for _ in range(reps))

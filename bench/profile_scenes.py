@@ -30,24 +30,38 @@ from relray.core.scene.job import parse_job
 SCENES = ("cornell", "heavy", "environment", "textured", "moving")
 
 
-def scene_benches(tmp: Path, heavy_triangles: int) -> dict[str, cm.RelrayBench]:
-    """The benchmark scenes (module docstring), files written into ``tmp``."""
+#: The benchmark scenes, in the order of the profile's columns.
+SCENES = ("cornell", "heavy", "environment", "textured", "moving")
+
+
+def scene_bench(name: str, tmp: Path, heavy_triangles: int) -> cm.RelrayBench:
+    """One benchmark scene (module docstring), its files written into ``tmp``."""
     tmp.mkdir(parents=True, exist_ok=True)
-    cornell = cm.RelrayBench(cm.make_job(cm.job_dict()))
-    env_dir, tex_dir = tmp / "profile_env", tmp / "profile_tex"
-    env_dir.mkdir(exist_ok=True)
-    tex_dir.mkdir(exist_ok=True)
-    environment.write_map(env_dir / "sky.exr")
-    env_job = parse_job(environment.job_data(64, 64, 1, 1, 0), env_dir / "job.toml")
-    tex_job = cm.make_job(textures.textured_cornell(tex_dir), tex_dir / "job.toml")
-    return {
-        "cornell": cornell,
-        "heavy": cm.RelrayBench(throughput.heavy_job(tmp, heavy_triangles)[0]),
-        "environment": cm.RelrayBench(env_job),
-        "textured": cm.RelrayBench(tex_job),
-        "moving": cm.RelrayBench(cornell.job,
-                                 scene=velocity_groups.grouped_scene(cornell.scene, 1)),
-    }
+    if name == "cornell":
+        return cm.RelrayBench(cm.make_job(cm.job_dict()))
+    if name == "heavy":
+        return cm.RelrayBench(throughput.heavy_job(tmp, heavy_triangles)[0])
+    if name == "environment":
+        env_dir = tmp / "profile_env"
+        env_dir.mkdir(exist_ok=True)
+        environment.write_map(env_dir / "sky.exr")
+        return cm.RelrayBench(parse_job(environment.job_data(64, 64, 1, 1, 0),
+                                        env_dir / "job.toml"))
+    if name == "textured":
+        tex_dir = tmp / "profile_tex"
+        tex_dir.mkdir(exist_ok=True)
+        return cm.RelrayBench(cm.make_job(textures.textured_cornell(tex_dir),
+                                          tex_dir / "job.toml"))
+    if name == "moving":
+        cornell = scene_bench("cornell", tmp, heavy_triangles)
+        return cm.RelrayBench(cornell.job,
+                              scene=velocity_groups.grouped_scene(cornell.scene, 1))
+    raise ValueError(f"unknown benchmark scene {name!r} (one of {', '.join(SCENES)})")
+
+
+def scene_benches(tmp: Path, heavy_triangles: int) -> dict[str, cm.RelrayBench]:
+    """Every benchmark scene, by name."""
+    return {name: scene_bench(name, tmp, heavy_triangles) for name in SCENES}
 
 
 def rows(tmp: Path, spp: int, size: int, heavy_triangles: int,

@@ -16,6 +16,7 @@ from relray.bench import (
     common,
     convergence,
     cycles_anchor,
+    profile_scenes,
     report,
     run,
     skips,
@@ -50,6 +51,17 @@ def test_ab_pairs_a_revision_with_this_checkout(tmp_path):
     assert (tree / "core" / "render" / "integrator.py").is_file()
     ns = ab.ns_per_path(here, "cornell", 1, 8, 1, tmp_path / "scenes")
     assert 0.0 < ns < 1e9
+
+
+def test_profile_scenes_builds_one_scene_by_name(tmp_path):
+    """profile_scenes.scene_bench: only the asked scene's files are written; an unknown
+    name is refused with the names it knows."""
+    bench = profile_scenes.scene_bench("environment", tmp_path, 2000)
+    assert (tmp_path / "profile_env" / "sky.exr").is_file()
+    assert not (tmp_path / "profile_tex").exists()
+    assert bench.render(spp=1, width=4, height=4, threads=1).cpu > 0.0
+    with pytest.raises(ValueError, match="cornell, heavy"):
+        profile_scenes.scene_bench("nowhere", tmp_path, 2000)
 
 
 def test_toml_writer_round_trips_the_presets():

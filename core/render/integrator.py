@@ -81,6 +81,7 @@ from ..physics import spectrum
 from ..physics.relativity import aberrate_doppler_ray
 from ..physics.spectrum import INV_DLOG
 from ..scene.geometry import RAY_OFFSET_POINT, ray_offset, ray_offset_at
+from . import rest_frames as rf
 from .accel import MISS_DISTANCE, Accel, Hits
 from .bsdf import (
     has_smooth_lobe,
@@ -109,15 +110,7 @@ from .lights import (
     triangle_light_pdf,
 )
 from .materials import SpectralTables
-from .rest_frames import CEN as SEG_CEN
-from .rest_frames import IG as SEG_IG
 from .rest_frames import SEG_COLUMNS, MovingScene, blocked_ray, static_query_args
-from .rest_frames import T_REF as SEG_T_REF
-from .rest_frames import B as SEG_B
-from .rest_frames import C as SEG_C
-from .rest_frames import G as SEG_G
-from .rest_frames import H as SEG_H
-from .rest_frames import Q as SEG_Q
 from .sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -189,10 +182,10 @@ class KernelScene(NamedTuple):
     sky_row: int
     eps: float
     # float64 (S, SEG_COLUMNS): per moving segment its row of the segment table
-    # (:class:`.rest_frames.SegmentTable` ``f``, the one the tracer reads): u's unit
-    # direction (columns SEG_H…+2), |u| (SEG_B), 1/γ_u, γ_u, γ_u²/(γ_u + 1) (SEG_IG, SEG_G,
-    # SEG_C), its frame's origin event (SEG_T_REF; SEG_Q…+2, accelerator coordinates), its
-    # group BVH's origin (SEG_CEN…+2, rest-frame coordinates)
+    # (:class:`.rest_frames.SegmentTable` ``f``, the one the tracer reads), columns named
+    # by rest_frames' constants: u's unit direction (H…H+2), |u| (B), 1/γ_u, γ_u,
+    # γ_u²/(γ_u + 1) (IG, G, C), its frame's origin event (T_REF; Q…Q+2, accelerator
+    # coordinates), its group BVH's origin (CEN…CEN+2, rest-frame coordinates)
     seg_f: np.ndarray
     l_seg: np.ndarray     # int32 (K,): a moving triangle light's segment, else -1
     shift: bool         # bodies shift wavelengths (``doppler``, not rgb)
@@ -736,9 +729,9 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         d_out = 1.0
         pl = (o[i, 0], o[i, 1], o[i, 2])
         if moving:
-            sh = (s_seg[sg, SEG_H], s_seg[sg, SEG_H + 1], s_seg[sg, SEG_H + 2])
-            sb = s_seg[sg, SEG_B]
-            sig, sgam, scg = s_seg[sg, SEG_IG], s_seg[sg, SEG_G], s_seg[sg, SEG_C]
+            sh = (s_seg[sg, rf.H], s_seg[sg, rf.H + 1], s_seg[sg, rf.H + 2])
+            sb = s_seg[sg, rf.B]
+            sig, sgam, scg = s_seg[sg, rf.IG], s_seg[sg, rf.G], s_seg[sg, rf.C]
             pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
             if r_seg[i] == sg:
                 # back on a body of the segment the ray left: its rest-frame direction is
@@ -924,14 +917,14 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                                                p_l * d_out * d_out, scale, delta, ok and ls < 0,
                                                wd, wm, a2)
             elif ls >= 0:  # a moving triangle light, sampled in its rest frame
-                lh = (s_seg[ls, SEG_H], s_seg[ls, SEG_H + 1], s_seg[ls, SEG_H + 2])
-                lb = s_seg[ls, SEG_B]
-                lig = s_seg[ls, SEG_IG]
-                xr = to_rest(p, t_ev, lh, lb, s_seg[ls, SEG_G], s_seg[ls, SEG_C],
-                             s_seg[ls, SEG_T_REF],
-                             (s_seg[ls, SEG_Q], s_seg[ls, SEG_Q + 1], s_seg[ls, SEG_Q + 2]),
-                             (s_seg[ls, SEG_CEN], s_seg[ls, SEG_CEN + 1],
-                              s_seg[ls, SEG_CEN + 2]))
+                lh = (s_seg[ls, rf.H], s_seg[ls, rf.H + 1], s_seg[ls, rf.H + 2])
+                lb = s_seg[ls, rf.B]
+                lig = s_seg[ls, rf.IG]
+                xr = to_rest(p, t_ev, lh, lb, s_seg[ls, rf.G], s_seg[ls, rf.C],
+                             s_seg[ls, rf.T_REF],
+                             (s_seg[ls, rf.Q], s_seg[ls, rf.Q + 1], s_seg[ls, rf.Q + 2]),
+                             (s_seg[ls, rf.CEN], s_seg[ls, rf.CEN + 1],
+                              s_seg[ls, rf.CEN + 2]))
                 wr, p_r, scale, delta, finite, target, ok = sample_light(
                     light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, xr[0], xr[1], xr[2],
                     eps)
