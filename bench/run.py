@@ -38,6 +38,7 @@ from relray.bench import (
     first_render,
     mitsuba_peer,
     moving_rays,
+    path_floor,
     peer_scenes,
     profile_scenes,
     report,
@@ -269,6 +270,9 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         cm.write_csv(out / "profile_scenes.csv",
                      profile_scenes.rows(tmp, plan.profile_spp, plan.profile_size,
                                          plan.heavy_triangles))
+        cm.write_csv(out / "path_floor.csv",
+                     path_floor.rows(tmp, plan.profile_size, plan.profile_spp,
+                                     plan.heavy_triangles))
         done("profiles")
     if "convergence" in sections:
         section("convergence")

@@ -37,6 +37,7 @@ from relray.core.render import film as film_mod
 from relray.core.render import frames as render
 from relray.core.render import integrator as integrator_mod
 from relray.core.render import rest_frames as rest_frames_mod
+from relray.core.render import whole_paths as whole_paths_mod
 from relray.core.scene import job as jobmod
 
 # Stage -> the functions timed for it: (module or class, attribute name).  Names that a
@@ -48,6 +49,7 @@ STAGES: dict[str, list[tuple[Any, str]]] = {
     "add_shadows": [(integrator_mod, "add_shadows")],
     "area lights": [(integrator_mod, "cross_area_lights")],
     "trace": [(render, "trace")],
+    "whole paths": [(whole_paths_mod, "trace")],
     "path keys": [(render, "path_keys")],
     "primary rays": [(camera_mod.PinholeCamera, "primary_rays"),
                      (camera_mod.PinholeCamera, "directions_cam"), (render, "lab_rays"),
@@ -117,6 +119,12 @@ class StageMeter:
             if rays:
                 self.rays_by[stage] = self.rays_by.get(stage, 0) + rays
 
+    def count(self, kind: str, rays: int) -> int:
+        """Add ``rays`` to ``rays_by[kind]`` only (a part of a stage's rays); returns 0."""
+        with self._lock:
+            self.rays_by[kind] = self.rays_by.get(kind, 0) + rays
+        return 0
+
     def _wrap(self, owner: Any, name: str, stage: str,
               rays: Callable[[tuple, Any], int] | None = None) -> None:
         orig = owner.__dict__.get(name) if isinstance(owner, type) else getattr(owner, name, None)
@@ -144,6 +152,10 @@ class StageMeter:
         # shade traces a static scene's shadow rays itself: those it made (its third
         # value) less those it left to trace (its second)
         self._wrap(integrator_mod, "shade", "shade", lambda a, out: out[2] - out[1])
+        # the whole-path kernel traces every ray of its paths itself: it returns how many
+        # (nearest-hit, shadow); its shadow rays are also counted apart
+        self._wrap(whole_paths_mod, "lambert_paths", "whole-path kernel",
+                   lambda a, out: out[0] + out[1] + self.count("whole-path shadow", out[1]))
         for stage, targets in self.stages.items():
             for owner, name in targets:
                 self._wrap(owner, name, stage)
@@ -179,9 +191,11 @@ def measure_bench(bench: cm.RelrayBench, threads: int, repeat: int = 3,
             "embree run occluded", 0.0)
         row = {"wall_s": t.wall, "cpu_s": t.cpu, "paths": stats.paths, "rays": m.rays,
                "intersect_rays": m.rays_by.get("embree run intersect", 0)
-               + m.rays_by.get("moving run intersect", 0),
+               + m.rays_by.get("moving run intersect", 0)
+               + m.rays_by.get("whole-path kernel", 0) - m.rays_by.get("whole-path shadow", 0),
                "occluded_rays": m.rays_by.get("embree run occluded", 0)
-               + m.rays_by.get("moving run occluded", 0) + m.rays_by.get("shade", 0),
+               + m.rays_by.get("moving run occluded", 0) + m.rays_by.get("shade", 0)
+               + m.rays_by.get("whole-path shadow", 0),
                "embree_s": embree, "load1": load,
                "hit_fraction": float(film.sum_alpha.sum() / max(film.count.sum(), 1))}
         if profile:
@@ -218,7 +232,10 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
     the Embree calls in
     them (the rest-frame rays and the merge of the groups' hits); "trace: other" is
     trace - Embree calls - velocity groups - shade - add_shadows
-    (buffers); "chunk: other" is chunk - trace - camera - hero - film (the inline numpy
+    (buffers); scenes that take whole paths (``render/whole_paths.py``) spend their
+    tracing in "whole-path kernel" (Embree inside it), its wrapper's buffers in "whole
+    paths: other"; "chunk: other" is chunk - trace - whole paths - camera - hero - film
+    (the inline numpy
     left in ``_trace_chunk``: D⁵, repeat/tile, AOVs); "outside chunks" is the process CPU
     time - chunk (thread pool, tiles, adaptive passes, other threads of the process).
     Stage names that the core no longer has read 0.
@@ -245,10 +262,12 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
         ("velocity groups: rest-frame rays with their Embree traversals", moving),
         ("trace: other (buffers)", g("trace") - calls - moving
          - g("shade", "add_shadows", "area lights")),
+        ("whole-path kernel (with all its Embree queries)", g("whole-path kernel")),
+        ("whole paths: other (buffers)", g("whole paths") - g("whole-path kernel")),
         *((f"camera: {n}", g(n)) for n in CAMERA_STAGES),
         *((f"hero: {n}", g(n)) for n in HERO_STAGES),
         *((f"film: {n}", g(n)) for n in FILM_STAGES),
-        ("chunk: other (inline numpy)", g("chunk") - g("trace") - inner),
+        ("chunk: other (inline numpy)", g("chunk") - g("trace", "whole paths") - inner),
         ("outside chunks (threads, tiles, passes)", total - g("chunk")),
     ]
     return [{"stage": name, "seconds": v, "share": v / total,
@@ -272,6 +291,7 @@ def shade_breakdown(bench: cm.RelrayBench, width: int = 128, height: int = 128,
     from numba import njit
 
     fr = bench.renderer(spp=1, width=width, height=height, threads=1)
+    fr.whole_paths = False  # (the Cornell box takes whole paths: its shade is studied here)
     captured: list[list[Any]] = []
     orig = integrator_mod.shade
     arg = {name: i for i, name in enumerate(inspect.signature(orig.py_func).parameters)}

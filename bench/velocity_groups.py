@@ -29,6 +29,11 @@ from relray.core.scene.geometry import Scene, scene_from_parts
 from relray.core.scene.worldlines import Segment, VelocityGroup
 
 COUNTS = (0, 1, 2, 4, 8)
+#: The static box is rendered by the wavefront integrator here, as the moving variants
+#: are: the ratios are the velocity groups' cost, like for like (the renderer itself
+#: traces the static box as whole paths, render/whole_paths.py, which moving scenes
+#: never take).
+WAVEFRONT_BASELINE = True
 SLOW = 1e-4
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0],
                        [0, 0, -1], [0.6, 0.8, 0], [0, 0.6, 0.8]], np.float64)
@@ -134,6 +139,7 @@ def group_rows(spp: int, width: int, height: int, threads: int,
     benches = {k: cm.RelrayBench(base.job, scene=s) for k, s in variants.items()}
     frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
            for k, b in benches.items()}
+    frs["0 groups"].whole_paths = not WAVEFRONT_BASELINE and frs["0 groups"].whole_paths
     images = {}
     for k, b in benches.items():
         b.render(renderer=frs[k])  # warm-up
@@ -170,6 +176,7 @@ def pair_rows(spp: int, width: int, height: int, threads: int,
                                                          scene=grouped_scene(base.scene, 1))}
     frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
            for k, b in benches.items()}
+    frs["static"].whole_paths = not WAVEFRONT_BASELINE and frs["static"].whole_paths
     for k, b in benches.items():
         b.render(renderer=frs[k])  # warm-up
     rows = []

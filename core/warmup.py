@@ -43,13 +43,29 @@ WARMUP_JOB: dict[str, Any] = {
 }
 
 
+#: A static Lambert scene of flat faces lit by an emissive quad: what whole paths in one
+#: kernel call trace (render/whole_paths.py), the Cornell box's kind of scene.
+LAMBERT_JOB: dict[str, Any] = {
+    **{k: WARMUP_JOB[k] for k in ("render", "output", "camera", "motion")},
+    "materials": [{"name": "grey", "base_color": [0.5, 0.5, 0.5]},
+                  {"name": "lamp", "base_color": [0.8, 0.8, 0.8], "emission": [1.0, 1.0, 1.0],
+                   "emission_strength": 5.0}],
+    "objects": [
+        {"shape": "box", "center": [0.0, 0.0, 1.0], "size": [1.0, 1.0, 1.0],
+         "material": "grey"},
+        {"shape": "quad", "material": "lamp",
+         "corners": [[-0.5, -0.5, 3.0], [0.5, -0.5, 3.0], [0.5, 0.5, 3.0], [-0.5, 0.5, 3.0]]}],
+}
+
+
 def warmup_jobs() -> list[dict[str, Any]]:
-    """:data:`WARMUP_JOB`, and the same without its moving sphere: the kernels are typed
-    per argument (a scene without moving objects passes other types), so both kinds are
+    """:data:`WARMUP_JOB`, the same without its moving sphere, and :data:`LAMBERT_JOB`:
+    the kernels are typed per argument (a scene without moving objects passes other
+    types), and the Lambert scene takes the whole-path kernel, so every kind is
     compiled."""
     static = dict(WARMUP_JOB)
     static["objects"] = [o for o in WARMUP_JOB["objects"] if "velocity" not in o]
-    return [static, WARMUP_JOB]
+    return [static, WARMUP_JOB, LAMBERT_JOB]
 
 
 def warm() -> float:

@@ -73,17 +73,29 @@ def test_toml_writer_round_trips_the_presets():
 
 
 def test_stage_meter_restores_the_core():
-    from relray.core.render import accel, integrator
+    """Both integrators are metered: the Cornell box's whole paths (the kernel's rays
+    counted from what it returns) and the wavefront's stages; the core is restored."""
+    from relray.core.render import accel, integrator, whole_paths
     from relray.core.render import frames as render
 
-    before = (render.trace, integrator.shade, accel.Accel.intersect, accel.intersect_rays)
+    def core():
+        return (render.trace, integrator.shade, accel.Accel.intersect, accel.intersect_rays,
+                whole_paths.trace, whole_paths.lambert_paths)
+
+    before = core()
     b = common.RelrayBench(common.make_job(common.job_dict(), width=8, height=8, spp=1))
+    fr = b.renderer(threads=1)
+    assert fr.whole_paths
     with throughput.StageMeter() as m:
-        b.render(threads=1)
+        b.render(renderer=fr)
+    assert m.seconds["whole-path kernel"] > 0 and "shade" not in m.seconds
+    assert m.rays_by["whole-path kernel"] >= 64 + m.rays_by["whole-path shadow"] > 64
+    fr.whole_paths = False
+    with throughput.StageMeter() as m:
+        b.render(renderer=fr)
     assert m.rays > 0 and m.seconds["shade"] > 0
     assert m.rays_by["embree run intersect"] >= 64   # every camera ray, at least
-    assert (render.trace, integrator.shade, accel.Accel.intersect, accel.intersect_rays) \
-        == before
+    assert core() == before
 
 
 def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
@@ -96,7 +108,7 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     for name in ("throughput", "profile", "scaling", "heavy", "beta_sweep", "skips",
                  "velocity_groups", "convergence_medians", "equal_error", "adaptive_gain",
                  "shade_breakdown", "environment_nee", "profile_scenes", "velocity_group_pairs",
-                 "embree_floor"):
+                 "embree_floor", "path_floor"):
         rows = common.read_csv(out / f"{name}.csv")
         assert rows, name
     tp = common.read_csv(out / "throughput.csv")[0]
@@ -107,6 +119,11 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     # where two meet at the hit, either), the same occlusion
     assert fl["agree_t"] == 1.0 and fl["agree_prim"] > 0.99 and fl["agree_occluded"] == 1.0
     assert fl["embree_intersect_ns"] > 0 and fl["embreex_intersect_ns"] > 0
+    # the whole-path kernel against the wavefront: the same paths' radiance, and Embree
+    # alone on its rays costs less than the kernel around them
+    for pf in common.read_csv(out / "path_floor.csv"):
+        assert pf["paths_differing"] <= 0.005 and pf["rays_per_path"] >= 1.0
+        assert 0.0 < pf["embree_ns"] < pf["whole_ns"]
     assert (out / "convergence.png").exists() and (out / "profile.png").exists()
     text = md.read_text()
     assert "## Headline" in text and "## 6. Profile" in text and "## 5b. Moving" in text

@@ -31,7 +31,7 @@ from ..scene.description import Job, RenderSettings
 from ..scene.geometry import Scene, build_scene
 from ..scene.motion import resolve_camera
 from ..scene.spectral_model import resolved_job
-from . import environment
+from . import environment, whole_paths
 from .accel import MISS_DISTANCE, Accel, max_distance
 from .camera import PinholeCamera
 from .film import Film, clamp_samples
@@ -249,6 +249,9 @@ class FrameRenderer:
         self.kernel = prep.kernel._replace(shift=self.doppler, beam=self.searchlight)
         # the denoising albedo/normal AOVs: traced only when asked for
         self.features = "albedo" in self.aovs or "normal" in self.aovs
+        # a static scene of Lambert surfaces lit by emissive triangles: whole paths in one
+        # kernel call (whole_paths.py), else the wavefront integrator
+        self.whole_paths = whole_paths.applies(self.kernel, prep.tracer, self.features)
         self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
 
     def render(self, event: relativity.ShutterEvent, frame: int,
@@ -370,10 +373,18 @@ class FrameRenderer:
         spread = 0.0
         if self.kernel.tex.enabled:  # the ray cones' start (textures.py)
             spread = lab_spread(pixel_spread(camera.tan_half_fov, camera.height), D)
-        L, t_hit, seg, feats = trace(self.kernel, prep.tracer, s.max_depth, keys, o_local,
-                                     d_lab, lamu, nlanes, sky_seen=not s.transparent,
-                                     buffers=keep.setdefault("trace", {}), t0=float(event.t),
-                                     features=self.features, spread=spread)
+        feats = None
+        if self.whole_paths:
+            L, t_hit, seg = whole_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
+                                              o_local, d_lab, lamu, nlanes,
+                                              buffers=keep.setdefault("whole", {}))
+        else:
+            L, t_hit, seg, feats = trace(self.kernel, prep.tracer, s.max_depth, keys,
+                                         o_local, d_lab, lamu, nlanes,
+                                         sky_seen=not s.transparent,
+                                         buffers=keep.setdefault("trace", {}),
+                                         t0=float(event.t), features=self.features,
+                                         spread=spread)
         alpha = np.less(t_hit, MISS_DISTANCE, out=b["alpha"])  # 1.0 where it hit
         sensor, lam_weight = b["sensor"], b["lam_weight"]
         sensor_values(L, lam, pdf, w_d, self.response, self.rgb_mode, sensor, lam_weight,

@@ -1,0 +1,213 @@
+"""The floor of a path's cost outside Embree: relray's whole-path kernel against its
+wavefront integrator and against Embree alone, on the same paths.
+
+    .venv/bin/python -m relray.bench.path_floor [--scene cornell] [--size 128] [--spp 16]
+                                                [--reps 5]
+
+Issue 12 asks that the work of a path outside Embree be at most two thirds of Embree's
+own (Embree's share of the CPU time ≥ 60 % on the Cornell box, ≥ 70 % on the heavy
+scene). :func:`relray.core.render.whole_paths.lambert_paths` is the smallest compiled
+kernel that computes relray's estimator on these scenes: each path traced to its end in
+one loop, Embree called from it, the state in registers, nothing but two-sided Lambert,
+triangle lights, NEE + MIS, four hero lanes and roulette (that module's docstring). What
+it spends outside Embree is what a scalar kernel must spend on these paths.
+
+Measured in one process, on the same camera rays, keys and hero lanes (relray's camera
+and spectral stages, run once, outside the timing), each the fastest of ``reps`` runs
+alternated, thread CPU time per path:
+
+- *wavefront*: ``integrator.trace`` (Embree, ``shade``, the glue between bounces), the
+  renderer's general integrator;
+- *whole paths*: ``whole_paths.lambert_paths``, what the renderer runs on these scenes;
+- *Embree*: Embree alone on the whole-path kernel's own rays (recorded in one more run,
+  then traced again by ``embree.intersect_rays`` / ``occluded_rays`` in the same order);
+- *numbers*: the random numbers alone that those paths draw (:func:`draw_numbers`).
+
+The whole-path kernel's work outside Embree is *whole paths* − *Embree*. The two
+integrators compute the same radiance with the same random numbers: the mean of each
+hero lane over the paths must agree within its Monte Carlo error (``agreement_z``, the
+largest |difference| / standard error over the lanes), and path by path they agree to
+float32 rounding except where a rounding difference flips a roulette decision
+(``paths_differing``: the share of paths whose radiance differs by more than 1e-4
+relative).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from relray.bench import common as cm
+from relray.bench import profile_scenes
+from relray.core.render import whole_paths
+from relray.core.render.embree import intersect_rays, occluded_rays
+from relray.core.render.integrator import FAST_MATH, RR_DEPTH, trace
+from relray.core.render.sampling import (
+    DIM_BSDF,
+    DIM_LIGHT,
+    DIM_ROULETTE,
+    bounce_dim,
+    path_keys,
+    progressive_offsets,
+    rand,
+    sobol2,
+)
+
+_MISS = np.float32(1e30)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
+def draw_numbers(keys, bounces):  # pragma: no cover - compiled
+    """The random numbers ``lambert_paths`` draws for paths that sampled ``bounces[i]``
+    continuations: per vertex the light pair, the continuation pair and, from
+    ``RR_DEPTH``, the roulette number (their sum, so that nothing is left out)."""
+    acc = 0.0
+    for i in range(keys.shape[0]):
+        key = keys[i]
+        for depth in range(bounces[i]):
+            a, b = sobol2(key, bounce_dim(depth, DIM_LIGHT))
+            c, e = sobol2(key, bounce_dim(depth, DIM_BSDF))
+            acc += a + b + c + e
+            if depth + 1 >= RR_DEPTH:
+                acc += rand(key, bounce_dim(depth, DIM_ROULETTE))
+    return acc
+
+
+def camera_stage(bench: cm.RelrayBench, size: int, spp: int, seed: int = 0):
+    """relray's camera and spectral stages for every path of frame 1 (size², spp):
+    (renderer, keys, origins, directions, lanes' table coordinates)."""
+    fr = bench.renderer(spp=spp, width=size, height=size, threads=1)
+    prep, ev = fr.prep, bench.event(None)
+    pix = np.repeat(np.arange(size * size, dtype=np.int64), spp)
+    samp = np.tile(np.arange(spp, dtype=np.int64), size * size)
+    keys = path_keys(seed, 1, pix, samp)
+    o, d, D, _ = fr.camera.primary_rays(ev.beta, keys, pix,
+                                        np.asarray(ev.x, np.float64) - prep.origin,
+                                        prep.radius)
+    lanes = fr.sampler.lanes(progressive_offsets(seed, 1, pix, samp), D, doppler=fr.doppler,
+                             searchlight=fr.searchlight)
+    return fr, keys, o, d, np.ascontiguousarray(lanes.lamu)
+
+
+def agreement_z(a: np.ndarray, b: np.ndarray) -> float:
+    """The largest |mean difference| / standard error over the lanes of two (N, 4)
+    radiance estimates (their errors added as if independent)."""
+    n = a.shape[0]
+    se = np.sqrt((a.var(axis=0) + b.var(axis=0)) / n) + 1e-30
+    return float(np.max(np.abs(a.mean(axis=0) - b.mean(axis=0)) / se))
+
+
+def paths_differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
+    """The share of paths (rows) whose radiance per lane differs by more than ``rel`` of
+    the larger of the two (plus a floor of ``rel`` times the mean radiance)."""
+    a, b = a.astype(np.float64), b.astype(np.float64)
+    tol = rel * (np.maximum(np.abs(a), np.abs(b)) + np.abs(a).mean())
+    return float(np.mean(np.any(np.abs(a - b) > tol, axis=1)))
+
+
+def rows(tmp: Path, size: int, spp: int, heavy_triangles: int,
+         reps: int = 5) -> list[dict[str, Any]]:
+    """:func:`measure` on the Cornell box and the heavy scene (``make bench``)."""
+    return [{"scene": name, **measure(profile_scenes.scene_bench(name, tmp, heavy_triangles),
+                                      size, spp, reps)}
+            for name in ("cornell", "heavy")]
+
+
+def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5,
+            seed: int = 0) -> dict[str, Any]:
+    """The module docstring's timings (ns of thread CPU per path, best of ``reps``) on
+    ``bench``'s scene (the Cornell box or the heavy scene of
+    :func:`.profile_scenes.scene_bench`; ValueError where the whole-path kernel does not
+    apply), the whole-path kernel's rays per path and the agreement of the two
+    integrators."""
+    fr, keys, o, d, lamu = camera_stage(bench, size, spp, seed)
+    prep, sc = fr.prep, fr.kernel
+    if not whole_paths.applies(sc, prep.tracer, False):
+        raise ValueError("the whole-path kernel does not apply to this scene")
+    n, depth = len(keys), fr.settings.max_depth
+    L = np.empty((n, 4), np.float32)
+    first_t = np.empty(n, np.float32)
+    log = (np.empty((n * depth, 3), np.float32), np.empty((n * depth, 3), np.float32),
+           np.empty((n * depth, 3), np.float32), np.empty((n * depth, 3), np.float32),
+           np.empty(n * depth, np.float32), np.zeros(n, np.int64))
+    args = whole_paths.scene_args(sc, prep.tracer)
+
+    def run_whole(record: bool) -> tuple[int, int]:
+        return whole_paths.lambert_paths(*args, keys, o, d, lamu, 4, depth, L, first_t,
+                                         record, log if record else whole_paths.NO_LOG)
+
+    buffers: dict = {}
+
+    def run_wavefront() -> tuple[float, np.ndarray]:
+        oo, dd = o.copy(), d.copy()
+        t0 = time.thread_time()
+        out = trace(sc, prep.tracer, depth, keys, oo, dd, lamu, 4, buffers=buffers)
+        return time.thread_time() - t0, out[0]
+
+    n_rays, n_sh = run_whole(True)
+    rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
+    hit_t, hit_p = np.empty(n_rays, np.float32), np.empty(n_rays, np.int32)
+    hit_u, hit_v = np.empty(n_rays, np.float32), np.empty(n_rays, np.float32)
+    blocked = np.empty(n_sh, np.bool_)
+    far = np.full(1, _MISS, np.float32)
+
+    def run_embree() -> None:
+        intersect_rays(args[0], rec_o[:n_rays], rec_d[:n_rays], far, hit_t, hit_p, hit_u,
+                       hit_v)
+        occluded_rays(args[0], sh_o[:n_sh], sh_d[:n_sh], sh_t[:n_sh], blocked)
+
+    whole_l = L.copy()
+    wave_l = run_wavefront()[1].copy()
+    draw_numbers(keys[:1], bounces[:1])
+    times: dict[str, list[float]] = {"wavefront": [], "whole": [], "embree": [],
+                                     "numbers": []}
+    for _ in range(reps):
+        times["wavefront"].append(run_wavefront()[0])
+        t0 = time.thread_time()
+        run_whole(False)
+        times["whole"].append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        run_embree()
+        times["embree"].append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        draw_numbers(keys, bounces)
+        times["numbers"].append(time.thread_time() - t0)
+    ns = {k: 1e9 * min(v) / n for k, v in times.items()}
+    return {"size": size, "spp": spp, "paths": n, "reps": reps,
+            "wavefront_ns": ns["wavefront"], "whole_ns": ns["whole"],
+            "embree_ns": ns["embree"], "numbers_ns": ns["numbers"],
+            "whole_other_ns": ns["whole"] - ns["embree"],
+            "wavefront_other_ns": ns["wavefront"] - ns["embree"],
+            "whole_embree_share": ns["embree"] / ns["whole"],
+            "wavefront_embree_share": ns["embree"] / ns["wavefront"],
+            "rays_per_path": n_rays / n, "shadow_rays_per_path": n_sh / n,
+            "bounces_per_path": float(bounces.mean()),
+            "agreement_z": agreement_z(whole_l.astype(np.float64),
+                                       wave_l.astype(np.float64)),
+            "paths_differing": paths_differing(whole_l, wave_l),
+            "load": cm.load_average()[0]}
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scene", choices=("cornell", "heavy"), default="cornell")
+    ap.add_argument("--heavy-triangles", type=int, default=1_000_000)
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--reps", type=int, default=5)
+    a = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory(prefix="relray-floor-") as tmp:
+        bench = profile_scenes.scene_bench(a.scene, Path(tmp), a.heavy_triangles)
+        r = {"scene": a.scene, **measure(bench, a.size, a.spp, a.reps)}
+    for k, v in r.items():
+        print(f"{k:24s} {v:.4g}" if isinstance(v, float) else f"{k:24s} {v}")
+
+
+if __name__ == "__main__":
+    main()

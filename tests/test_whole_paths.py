@@ -1,0 +1,134 @@
+"""core/render/whole_paths.py: whole paths in one kernel call for static Lambert scenes
+lit by emissive triangles.
+
+Its estimator is the wavefront integrator's, with the same random numbers, so the two
+must give the same radiance path by path (to float32 rounding: a rounding difference may
+flip a roulette decision now and then, hence a small allowance of differing paths), and
+the same camera-ray hit distances; and the renderer must take it exactly where it
+applies.
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relray.core.render import whole_paths
+from relray.core.render.frames import build_renderer
+from relray.core.render.integrator import trace
+from relray.core.render.sampling import path_keys, progressive_offsets
+from relray.core.scene.job import parse_job
+from relray.core.scene.motion import frame_events
+
+CORNELL = Path(__file__).resolve().parents[1] / "presets" / "cornell.toml"
+
+
+def cornell(**render) -> dict:
+    data = tomllib.loads(CORNELL.read_text())
+    data["render"].update({"width": 16, "height": 16, "spp": 4, "threads": 1, **render})
+    data["output"]["aovs"] = ["depth"]
+    return data
+
+
+def renderer(data: dict, tmp_path: Path):
+    job = parse_job(copy.deepcopy(data), tmp_path / "job.toml")
+    return build_renderer(job), frame_events(job)[0][1]
+
+
+def camera_paths(fr, ev, spp: int):
+    """The camera stage of every path of the frame, as the renderer's chunks make it:
+    (keys, origins, directions, lanes' table coordinates, lanes)."""
+    n_pix = fr.camera.width * fr.camera.height
+    pix = np.repeat(np.arange(n_pix, dtype=np.int64), spp)
+    samp = np.tile(np.arange(spp, dtype=np.int64), n_pix)
+    keys = path_keys(fr.settings.seed, 1, pix, samp)
+    o, d, D, _ = fr.camera.primary_rays(ev.beta, keys, pix,
+                                        np.asarray(ev.x, np.float64) - fr.prep.origin,
+                                        fr.prep.radius)
+    if fr.rgb_mode:
+        lamu = np.tile(np.array([0.0, 1.0, 2.0, 0.0], np.float32), (len(keys), 1))
+        return keys, o, d, lamu, 3
+    lanes = fr.sampler.lanes(progressive_offsets(fr.settings.seed, 1, pix, samp), D,
+                             doppler=fr.doppler, searchlight=fr.searchlight)
+    return keys, o, d, np.ascontiguousarray(lanes.lamu), 4
+
+
+def differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
+    """Share of paths whose radiance differs in some lane by more than ``rel`` relative."""
+    a, b = a.astype(np.float64), b.astype(np.float64)
+    tol = rel * (np.maximum(np.abs(a), np.abs(b)) + np.abs(a).mean())
+    return float(np.mean(np.any(np.abs(a - b) > tol, axis=1)))
+
+
+@pytest.mark.parametrize("spectral,beta", [("cie1931", 0.0), ("cie1931", 0.6),
+                                           ("rgb", 0.0)])
+def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
+        tmp_path, spectral, beta):
+    data = cornell(spectral=spectral, spp=8)
+    data["motion"]["beta"] = [0.0, beta, 0.0]  # towards the box: shifted lanes, aberration
+    fr, ev = renderer(data, tmp_path)
+    assert fr.whole_paths
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
+    depth = fr.settings.max_depth
+    L1, t1, seg1 = whole_paths.trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(),
+                                     d.copy(), lamu, nlanes)
+    L2, t2, seg2, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
+                            nlanes)
+    assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
+    if nlanes == 3:
+        assert np.all(L1[:, 3] == 0.0)
+    assert differing(L1[:, :nlanes], L2[:, :nlanes]) <= 0.005
+    np.testing.assert_array_equal(t1, t2)
+    assert np.all(seg1 == -1) and np.all(seg2 == -1)
+
+
+def test_the_renderer_takes_whole_paths_where_they_apply_and_its_image_is_unchanged(
+        tmp_path):
+    fr, ev = renderer(cornell(spp=8), tmp_path)
+    assert fr.whole_paths
+    film, _ = fr.render(ev, 1)
+    img = film.resolve(fr.to_rgb)
+    fr.whole_paths = False
+    film2, _ = fr.render(ev, 1)
+    ref = film2.resolve(fr.to_rgb)
+    np.testing.assert_allclose(img.rgba, ref.rgba, rtol=1e-3, atol=1e-4 * ref.rgba.max())
+    np.testing.assert_array_equal(img.aovs["depth"], ref.aovs["depth"])
+
+
+def _metal_walls(data):
+    data["materials"][0]["metallic"] = 1.0
+    data["materials"][0]["roughness"] = 0.3
+
+
+def _sky(data):
+    data["scene"]["background"] = [0.2, 0.3, 0.4]
+
+
+def _moving_box(data):
+    data["objects"][0]["velocity"] = [0.0, 0.0, 0.3]
+
+
+def _point_light(data):
+    data["lights"] = [{"type": "point", "position": [0.0, 0.0, 1.5], "power": 10.0}]
+
+
+@pytest.mark.parametrize("change", [_metal_walls, _sky, _moving_box, _point_light])
+def test_scenes_that_need_more_take_the_wavefront_integrator(tmp_path, change):
+    data = cornell()
+    change(data)
+    fr, _ = renderer(data, tmp_path)
+    assert not fr.whole_paths
+
+
+def test_denoising_features_take_the_wavefront_integrator(tmp_path):
+    data = cornell()
+    fr, _ = renderer(data, tmp_path)
+    assert whole_paths.applies(fr.kernel, fr.prep.tracer, False)
+    assert not whole_paths.applies(fr.kernel, fr.prep.tracer, True)
+    data["output"]["aovs"] = ["albedo", "normal"]
+    fr, _ = renderer(data, tmp_path)
+    assert not fr.whole_paths
