@@ -960,6 +960,12 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
             "they ran interleaved, so the ratio is the figure to read.\n")
 
 
+def _embree_share_cell(r: dict[str, Any]) -> str:
+    """A throughput row's Embree share in %, "–" where no Embree loop was timed (whole
+    paths: their queries are inside the kernel)."""
+    return "–" if r["embree_s"] <= 0.0 else f"{100 * r['embree_share']:.1f}"
+
+
 def _section_throughput(add, d, plots, md, meta) -> None:
     add("## 3. Throughput\n")
     tp = d["throughput"]
@@ -977,11 +983,12 @@ def _section_throughput(add, d, plots, md, meta) -> None:
                         ".2f"),
                        ("shadow rays / path", lambda r: r["occluded_rays"] / r["paths"],
                         ".2f"),
-                       ("Embree share of CPU", lambda r: 100 * r["embree_share"], ".1f"),
+                       ("Embree share of CPU", _embree_share_cell, ""),
                        ("ns per ray (CPU)", "ns_per_ray_cpu", ".0f"),
                        ("load", "load1", ".1f")]))
         add("\n(M = millions; Embree share in %, of the nearest-hit queries: a static "
-            "scene's shadow rays are traced inside the shade kernel, §6.)\n")
+            "scene's shadow rays are traced inside the shade kernel, §6; –: whole paths, "
+            "whose Embree queries are inside their kernel, §6 \"Whole paths\".)\n")
     fl = d["embree_floor"]
     if fl:
         f = fl[0]
@@ -1033,7 +1040,7 @@ def _section_throughput(add, d, plots, md, meta) -> None:
                        ("prepare (BVH, tables) s", "prepare_s", ".2f"),
                        ("paths / CPU-s", lambda r: r["paths_per_cpu_s"] / 1e6, ".3f"),
                        ("rays / CPU-s", lambda r: r["rays_per_cpu_s"] / 1e6, ".2f"),
-                       ("Embree share", lambda r: 100 * r["embree_share"], ".0f"),
+                       ("Embree share", _embree_share_cell, ""),
                        ("ns per ray (CPU)", "ns_per_ray_cpu", ".0f")]))
         add(f"\n{hv[0]['width']:.0f}², {hv[0]['spp']:.0f} spp, 1 thread.\n")
     bs = d["beta_sweep"]
@@ -1648,6 +1655,29 @@ def _section_recommendations(add, d) -> None:
     emb_i = _ns(d, "Embree intersect")
     emb_o = shadow_embree_ns(d) or 0.0
     shade = _ns(d, "shade kernel")
+    pfc = {r["scene"]: r for r in d["path_floor"]}
+    if pfc:
+        ratios = ", ".join(f"{n} {r['whole_ns'] / r['wavefront_ns']:.2f}"
+                           for n, r in pfc.items())
+        add("- **Whole paths in one kernel call** (`render/whole_paths.py`; the Cornell box "
+            "and the heavy scene): a static scene of Lambert surfaces lit by emissive "
+            "triangles (no textures, vertex normals, sky, map or other lights, no denoising "
+            "features) is traced path by path, each to its end in one compiled loop that "
+            "calls Embree itself, with the wavefront integrator's estimator and random "
+            "numbers: the two give the same radiance path by path "
+            "(`tests/test_whole_paths.py`; §6). CPU per path, whole paths ÷ wavefront on "
+            f"the same paths (§6): {ratios}. In this round's §2 runs (2026-11-26 12:10–"
+            "12:36, load 1.0–2.5), the Cornell box against Mitsuba at equal relative MSE, "
+            "high / low level: `llvm_ad_spectral` **0.69 / 0.61** (0.98 / 0.78 before), "
+            "`scalar_spectral` **0.39 / 0.30** (0.48 / 0.41), M paths per CPU-second relray "
+            "0.90, `llvm_ad_spectral` 0.67, `scalar_spectral` 0.36; against Cycles (2 "
+            "threads, CPU time) 0.31 / **0.25** (0.38 / 0.38); the heavy scene against "
+            "`llvm_ad_spectral` **0.68 / 0.65** (1.19 / 1.29 in the last run), "
+            "`scalar_spectral` 0.44 / **0.37** (0.70 / 0.70), Cycles **0.16 / 0.16** "
+            "(0.28 / 0.30). The environment-lit and textured scenes take the wavefront as "
+            "before: in the same run, against `llvm_ad_spectral` 1.05 / **0.92** and "
+            "**0.84 / 0.63**, `scalar_spectral` 0.52 / 0.42 and **0.39 / 0.26**, Cycles "
+            "**0.25 / 0.25** and **0.22 / 0.16**.")
     add("- **Environment maps** (`render/environment.py`; the environment-lit scene, §2 "
         "and §6): a lookup evaluates the four hero lanes of a texel in one call (before: "
         "one compiled call per lane and per texel, 16 for the bilinear lookup of a map "
@@ -1691,28 +1721,44 @@ def _section_recommendations(add, d) -> None:
         "renders); "
         "`bench/moving_rays.py` measures one ray's cost in a moving scene; the stage "
         "meter counts a moving scene's rays again (an argument index had gone stale).\n")
-    add(f"**Where a Cornell path's {total:.0f} ns go**: the nearest-hit queries "
-        f"{emb_i:.0f} ns; the shade kernel {shade:.0f} ns, of which about {emb_o:.0f} ns "
-        "are its shadow rays' Embree queries (occluded rays per path × Embree's own ns per "
-        "shadow ray, §3); Embree's share is therefore about "
-        f"{100 * (emb_i + emb_o) / total:.0f} % of the CPU time. The rest is the shading "
-        "arithmetic (NEE + MIS + BSDF sampling over four lanes, no single hot spot above "
-        "3 % of the samples in `perf`), the camera rays and hero wavelengths "
-        f"({_ns(d, 'camera:', 'hero:'):.0f} ns) and the film ({_ns(d, 'film:'):.0f} ns).\n")
+    pf = {r["scene"]: r for r in d["path_floor"]}
+    if "cornell" in pf:
+        c = pf["cornell"]
+        add(f"**Where a Cornell path's {c['whole_ns']:.0f} ns go** (the whole-path kernel, "
+            "§6): Embree alone on its rays "
+            f"{c['embree_ns']:.0f} ns ({100 * c['whole_embree_share']:.0f} %); outside "
+            f"Embree {c['whole_other_ns']:.0f} ns, of which {c['numbers_ns']:.0f} ns draw "
+            "the random numbers and the rest is the four lanes' table lookups, the light "
+            "sample, the shadow ray's and the continuation's set-up and the ray offsets. "
+            "Around the kernel the camera rays and hero wavelengths cost "
+            f"{_ns(d, 'camera:', 'hero:'):.0f} ns and the film "
+            f"{_ns(d, 'film:'):.0f} ns per path (§6's profile). The wavefront integrator "
+            f"spends {c['wavefront_other_ns']:.0f} ns outside Embree on the same paths.\n")
+    else:
+        add(f"**Where a Cornell path's {total:.0f} ns go**: the nearest-hit queries "
+            f"{emb_i:.0f} ns; the shade kernel {shade:.0f} ns, of which about {emb_o:.0f} "
+            "ns are its shadow rays' Embree queries (§3); the camera rays and hero "
+            f"wavelengths {_ns(d, 'camera:', 'hero:'):.0f} ns; the film "
+            f"{_ns(d, 'film:'):.0f} ns.\n")
     add("Next steps, by expected gain:\n")
-    add("1. **The continuation rays in the kernel too**: with nearest-hit queries from "
-        "`shade`, a path runs to its end in one kernel call (no per-bounce hit arrays, "
-        "compaction or Python between bounces: "
-        f"{_ns(d, 'trace: other', 'Embree wrappers'):.0f} ns per path now), and the "
-        "wavefront can become a loop over whole paths.")
-    add("2. **Shade arithmetic in float32 and structure-of-arrays lanes**, so numba's "
-        "SIMD can work across the four hero lanes and across rays of one material; "
-        "today float32 loads are widened to float64 and back.")
+    add("1. **Paths in SIMD lanes** (the only way to the Embree-share goals, §6 \"Whole "
+        "paths, and the floor they show\"): 8 paths per kernel iteration in "
+        "structure-of-arrays lanes, the random numbers and the shading computed for all "
+        "8 at once, Embree's `rtcIntersect8`/`rtcOccluded8` for their rays, lanes that "
+        "finish refilled from the queue: what Mitsuba's LLVM variant does, written out by "
+        "hand because numba does not vectorise a loop that calls Embree.")
+    add("2. **Whole paths for more scenes**: the whole-path kernel covers Lambert surfaces "
+        "lit by emissive triangles; vertex normals, the principled material's glossy "
+        "and glass lobes, the environment map and textures would let the "
+        "environment-lit and textured scenes shed the wavefront's own cost too (the "
+        "difference between the two integrators above), each as a branch that costs "
+        "nothing where it is not used; the wavefront stays for moving bodies, alpha "
+        "cut-outs and the denoising features.")
     add("3. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
         f"`Film.add_samples`, {_ns(d, 'film:'):.0f} ns per path): one pass, no (N, 3) "
         "array.")
-    add("4. **Packets for camera rays** (`rtcIntersect8`): coherent primary rays, a third "
-        "of the nearest-hit queries.")
+    add("4. **Cheaper random numbers**: `sobol2`'s bit reversals as LLVM's `bitreverse` "
+        "intrinsic (a few % of the numbers' cost).")
     add("")
 
 
