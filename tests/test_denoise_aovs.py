@@ -164,8 +164,9 @@ def _cornell(tmp_path, aovs=("depth",), **render_keys):
                                                           dir=Path(tmp_path)))
 
 
-def _render_job(job):
+def _render_job(job, whole_paths: bool = True):
     renderer = frames_mod.build_renderer(job)
+    renderer.whole_paths = renderer.whole_paths and whole_paths
     frame, event = frame_events(job)[0]
     film, _ = renderer.render(event, frame)
     return renderer, film.resolve(renderer.to_rgb)
@@ -173,14 +174,20 @@ def _render_job(job):
 
 def test_features_leave_the_image_alone_and_are_not_traced_unless_asked(tmp_path):
     """The feature code uses no random numbers and changes no path: the Cornell box's
-    image is bit-identical with and without the albedo/normal AOVs; without them the
-    renderer does not trace them."""
-    plain_r, plain = _render_job(_cornell(tmp_path))
+    image is bit-identical with and without the albedo/normal AOVs (features are traced
+    by the wavefront integrator: the plain render is made by it too); without them the
+    renderer does not trace them, and takes whole paths (render/whole_paths.py), whose
+    image is the same to float32 rounding."""
+    plain_r, plain = _render_job(_cornell(tmp_path), whole_paths=False)
     feat_r, feat = _render_job(_cornell(tmp_path, aovs=("depth", "albedo", "normal")))
-    assert not plain_r.features and feat_r.features
+    assert not plain_r.features and feat_r.features and not feat_r.whole_paths
     assert set(plain.aovs) == {"depth"}
     np.testing.assert_array_equal(plain.rgba, feat.rgba)
     np.testing.assert_array_equal(plain.aovs["depth"], feat.aovs["depth"])
+    whole_r, whole = _render_job(_cornell(tmp_path))
+    assert whole_r.whole_paths
+    np.testing.assert_allclose(whole.rgba, plain.rgba, rtol=1e-4, atol=1e-6)
+    np.testing.assert_array_equal(whole.aovs["depth"], plain.aovs["depth"])
     albedo = feat.aovs["albedo"]
     assert albedo.min() >= 0.0 and albedo.max() <= 1.0 and albedo.mean() > 0.2
     length = np.linalg.norm(feat.aovs["normal"], axis=2)
