@@ -386,9 +386,8 @@ def env_sample(marg, cond, pmf, rot, u1, u2):
 def env_light_sample(marg, cond, pmf, rot, p_sel, u1, u2):
     """Next-event estimation towards the map, picked with probability ``p_sel``: the
     tuple of :func:`.lights.sample_light` (wi, p_sel · pdf, scale 1, not delta, at
-    infinity, accepted when the pdf is positive); a light at infinity has no target
-    point, so the target slot carries the sampled texel, (row, column, 0), for
-    :func:`env_lanes` (no second lookup of wi's texel)."""
+    infinity: no target point, accepted when the pdf is positive), and the sampled
+    texel (row, column) for :func:`env_lanes` (no second lookup of wi's texel)."""
     wi, pdf, r, c = env_sample(marg, cond, pmf, rot, u1, u2)
     p_l = p_sel * pdf
-    return wi, p_l, 1.0, False, False, (np.float64(r), np.float64(c), 0.0), p_l > 0.0
+    return (wi, p_l, 1.0, False, False, (0.0, 0.0, 0.0), p_l > 0.0), (r, c)

@@ -887,6 +887,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             is_env = s_l_kind[k] == ENV
             d_l = 1.0  # the Doppler factor the light's spectrum is looked up with
             r_l = 0.0  # a moving light's rest-frame distance
+            texel = (0, 0)  # the map's texel that an environment sample lies in
             # a light of the very body (segment) the vertex is on: both rest in its frame,
             # no Doppler factor between them; sampled as in a static scene
             same_body = moving and ls == sg
@@ -898,7 +899,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             elif moving:  # lights are sampled in the lab, from the hit's lab point
                 eps_l = ray_offset_at(s_eps, pl[0], pl[1], pl[2])
                 if is_env:
-                    wi, p_l, scale, delta, finite, target, ok = env_light_sample(
+                    (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
                         s_env_marg, s_env_cond, s_env_pmf, s_env_rot, p_sel,
                         rescale_uniform(u_a, cdf_k, p_sel), u2)
                 else:
@@ -940,7 +941,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                                                ok, wd, wm, a2)
             else:
                 if is_env:
-                    wi, p_l, scale, delta, finite, target, ok = env_light_sample(
+                    (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
                         s_env_marg, s_env_cond, s_env_pmf, s_env_rot, p_sel,
                         rescale_uniform(u_a, cdf_k, p_sel), u2)
                 else:
@@ -954,7 +955,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 lshift = math.log(d_l) * INV_DLOG if s_shift else 0.0
                 if s_beam:
                     c *= d_l * d_l * d_l * d_l * d_l
-                r_e, c_e = int(target[0]), int(target[1])  # the sampled texel
+                r_e, c_e = texel
                 lu4 = (lamu[pi, 0] + lshift, lamu[pi, 1] + lshift, lamu[pi, 2] + lshift,
                        lamu[pi, 3] + lshift if nlanes == 4 else 0.0)
                 v4 = env_lanes(s_env_tex, r_e, c_e, rgb_lanes, s_env_nm, lu4,
