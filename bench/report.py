@@ -1266,8 +1266,11 @@ def _section_first(add, d) -> None:
         add("The command line: `relray render presets/cornell.toml --spp 1` (256², 1 spp, "
             "the EXR and PNG written), from process start to exit; *cold*: an empty kernel "
             "cache, *warm*: the median of "
-            f"{d['first_cli'][-1]['repeat']:.0f} runs with the cache filled. The goal of "
-            "issue 12 is 1 s warm.\n")
+            f"{d['first_cli'][-1]['repeat']:.0f} runs with the cache filled; every "
+            "process has relray's modules byte-compiled (as an installed package has: "
+            "`first_render._python_env`; this machine's `PYTHONDONTWRITEBYTECODE=1` had "
+            "made every start compile them again, about 0.18 s, before 2026-11-26 12:00). "
+            "The goal of issue 12 is 1 s warm.\n")
         add(table(d["first_cli"], [("case", "case", ""), ("wall (s)", "wall_s", ".2f"),
                                    ("CPU (s)", "cpu_s", ".2f"),
                                    ("of it: imports (s)", "import_s", ".2f"),
@@ -1296,13 +1299,22 @@ FIRST_CLI_NOTES = (
     "0.327 against 0.302. "
     "Compiling `nee_factors` and `lights.sample_light` apart as well gives 48 CPU s but "
     "costs 8 % of Cornell's throughput (medians of 5 alternated runs), so they stay "
-    "inlined: the 45 s goal is not met.\n\n"
+    "inlined: the 45 s goal is not met. Since whole paths (`render/whole_paths.py`, "
+    "2026-11-26), the Cornell box's command line does not compile `shade` at all (its "
+    "scene takes the whole-path kernel): cold 23.7 s, warm 1.73 s in the table above "
+    "(86 s and 2.59 s before, without bytecode); a scene that needs the wavefront, as "
+    "Blender's default scene with its point light does, still compiles `shade` at its "
+    "first render (the F12 rows above).\n\n"
     "*Warm*: with the kernels cached, numba alone takes about 1 s before relray does any "
     "work (load 1.3, cProfile): importing numba (0.45 s with numpy) and, at the first "
     "cached kernel, numba's typing and lowering registries (0.45-0.57 s, 0.14 s of it "
     "`scipy.linalg`, imported by numba's BLAS check); relray's own share is the job "
     "schema (pydantic, 0.18 s), its modules, a 0.19 s render and 0.10 s of writing. "
-    "The 1 s goal is not reachable while the command line loads numba's JIT.\n")
+    "The 1 s goal is not reachable while the command line loads numba's JIT. A second "
+    "cProfile (2026-11-26 11:52, load 0.6, 2.1 s in all, 0.18 s of it compiling "
+    "relray's modules for want of bytecode): importing numba 0.62 s, its registries at "
+    "the first cached kernel 0.43 s and `scipy.linalg` 0.20 s, the job schema 0.21 s, "
+    "the render 0.19 s.\n")
 
 
 def _section_environment(add, d) -> None:

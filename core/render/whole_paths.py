@@ -99,11 +99,13 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
     """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
     ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``) to its end: its lab
     radiance per lane into ``L[i]`` (lanes ≥ nlanes 0), the camera ray's hit distance
-    into ``first_t[i]`` (1e30: none). The scene arrays are :class:`.integrator.KernelScene`'s
-    fields of the same names (``handle``: the static BVH's Embree scene).
+    into ``first_t[i]`` (1e30: none). The scene arguments are those of
+    :func:`scene_args`, in its order (``handle``: the static BVH's Embree scene; the
+    others :class:`.integrator.KernelScene`'s fields).
 
-    ``record`` (benchmarks): every nearest-hit ray into ``log`` = (origins, directions,
-    shadow origins, shadow directions, shadow lengths, continuations per path), room for
+    ``record`` (benchmarks): every nearest-hit and every shadow ray, and the number of
+    continuations of each path, into ``log`` = (origins, directions, shadow origins,
+    shadow directions, shadow lengths, continuations per path), with room for
     ``max_depth`` rays of each kind per path. Returns (nearest-hit rays, shadow rays)."""
     f, w, addr = rayhit_buffer()
     rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
