@@ -46,6 +46,7 @@ from numba import njit
 from relray.bench import common as cm
 from relray.bench import profile_scenes
 from relray.core.render import whole_paths
+from relray.core.render.accel import MISS_DISTANCE
 from relray.core.render.embree import intersect_rays, occluded_rays
 from relray.core.render.integrator import FAST_MATH, RR_DEPTH, trace
 from relray.core.render.sampling import (
@@ -58,8 +59,6 @@ from relray.core.render.sampling import (
     rand,
     sobol2,
 )
-
-_MISS = np.float32(1e30)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
@@ -155,7 +154,7 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
     hit_t, hit_p = np.empty(n_rays, np.float32), np.empty(n_rays, np.int32)
     hit_u, hit_v = np.empty(n_rays, np.float32), np.empty(n_rays, np.float32)
     blocked = np.empty(n_sh, np.bool_)
-    far = np.full(1, _MISS, np.float32)
+    far = np.full(1, MISS_DISTANCE, np.float32)
 
     def run_embree() -> None:
         intersect_rays(args[0], rec_o[:n_rays], rec_d[:n_rays], far, hit_t, hit_p, hit_u,

@@ -29,11 +29,6 @@ from relray.core.scene.geometry import Scene, scene_from_parts
 from relray.core.scene.worldlines import Segment, VelocityGroup
 
 COUNTS = (0, 1, 2, 4, 8)
-#: The static box is rendered by the wavefront integrator here, as the moving variants
-#: are: the ratios are the velocity groups' cost, like for like (the renderer itself
-#: traces the static box as whole paths, render/whole_paths.py, which moving scenes
-#: never take).
-WAVEFRONT_BASELINE = True
 SLOW = 1e-4
 DIRECTIONS = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0],
                        [0, 0, -1], [0.6, 0.8, 0], [0, 0.6, 0.8]], np.float64)
@@ -132,14 +127,17 @@ def noise_rows(spp: int, width: int, height: int, threads: int,
 def group_rows(spp: int, width: int, height: int, threads: int,
                repeat: int) -> list[dict[str, Any]]:
     """CPU seconds per spp per variant (medians of interleaved runs), and the ratio to
-    the static scene."""
+    the static scene. The static box is rendered by the wavefront integrator here, as
+    the moving variants are, so the ratios are the velocity groups' cost like for like
+    (the renderer itself traces the static box as whole paths, render/whole_paths.py,
+    which moving scenes never take); so in :func:`pair_rows`."""
     base = cm.RelrayBench(cm.make_job(cm.job_dict()))
     variants = {f"{n} groups": grouped_scene(base.scene, n) for n in COUNTS}
     variants["1 group: the tall box"] = grouped_scene(base.scene, 1, tall_box(base.scene))
     benches = {k: cm.RelrayBench(base.job, scene=s) for k, s in variants.items()}
     frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
            for k, b in benches.items()}
-    frs["0 groups"].whole_paths = not WAVEFRONT_BASELINE and frs["0 groups"].whole_paths
+    frs["0 groups"].whole_paths = False  # like for like: see group_rows' docstring
     images = {}
     for k, b in benches.items():
         b.render(renderer=frs[k])  # warm-up
@@ -176,7 +174,7 @@ def pair_rows(spp: int, width: int, height: int, threads: int,
                                                          scene=grouped_scene(base.scene, 1))}
     frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
            for k, b in benches.items()}
-    frs["static"].whole_paths = not WAVEFRONT_BASELINE and frs["static"].whole_paths
+    frs["static"].whole_paths = False  # like for like: see group_rows' docstring
     for k, b in benches.items():
         b.render(renderer=frs[k])  # warm-up
     rows = []

@@ -42,7 +42,7 @@ from numba import njit
 
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
-from .accel import Accel
+from .accel import MISS_DISTANCE, Accel
 from .embree import intersect1, occluded1, rayhit_buffer
 from .integrator import (
     FAST_MATH,
@@ -71,7 +71,6 @@ from .sampling import (
     uniform_triangle,
 )
 
-_MISS = np.float32(1e30)
 _INV_PI = 1.0 / math.pi
 #: a log of no rays (``lambert_paths``' ``log`` when nothing is recorded)
 NO_LOG = (np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32),
@@ -125,7 +124,7 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
             thr[j] = 1.0
         ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-        first_t[i] = _MISS
+        first_t[i] = MISS_DISTANCE
         prev_pdf = 0.0
         if record:
             bounces[i] = 0
@@ -134,7 +133,7 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
                 rec_o[n_rays, 0], rec_o[n_rays, 1], rec_o[n_rays, 2] = ox, oy, oz
                 rec_d[n_rays, 0], rec_d[n_rays, 1], rec_d[n_rays, 2] = dx, dy, dz
             n_rays += 1
-            t, tri, b1, b2 = intersect1(handle, f, w, addr, ox, oy, oz, dx, dy, dz, _MISS)
+            t, tri, b1, b2 = intersect1(handle, f, w, addr, ox, oy, oz, dx, dy, dz, MISS_DISTANCE)
             if tri < 0:
                 break
             if depth == 0:
