@@ -7,10 +7,12 @@ wavefront integrator and against Embree alone, on the same paths.
 Issue 12 asks that the work of a path outside Embree be at most two thirds of Embree's
 own (Embree's share of the CPU time ≥ 60 % on the Cornell box, ≥ 70 % on the heavy
 scene). :func:`relray.core.render.whole_paths.lambert_paths` is the smallest compiled
-kernel that computes relray's estimator on these scenes: each path traced to its end in
-one loop, Embree called from it, the state in registers, nothing but two-sided Lambert,
-triangle lights, NEE + MIS, four hero lanes and roulette (that module's docstring). What
-it spends outside Embree is what a scalar kernel must spend on these paths.
+kernel that computes relray's estimator on these scenes (the Cornell box, the heavy
+scene and the environment-lit scene): each path traced to its end in one loop, Embree
+called from it, the state in registers, nothing but two-sided Lambert, the scene's
+lights (triangles, or the map), NEE + MIS, four hero lanes and roulette (that module's
+docstring). What it spends outside Embree is what a scalar kernel must spend on these
+paths.
 
 Measured in one process, on the same camera rays, keys and hero lanes (relray's camera
 and spectral stages, run once, outside the timing), each the fastest of ``reps`` runs
@@ -59,6 +61,9 @@ from relray.core.render.sampling import (
     rand,
     sobol2,
 )
+
+#: the benchmark scenes that take whole paths (:func:`.profile_scenes.scene_bench`)
+FLOOR_SCENES = ("cornell", "heavy", "environment")
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
@@ -112,16 +117,16 @@ def paths_differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
 
 def rows(tmp: Path, size: int, spp: int, heavy_triangles: int,
          reps: int = 5) -> list[dict[str, Any]]:
-    """:func:`measure` on the Cornell box and the heavy scene (``make bench``)."""
+    """:func:`measure` on each of :data:`FLOOR_SCENES` (``make bench``)."""
     return [{"scene": name, **measure(profile_scenes.scene_bench(name, tmp, heavy_triangles),
                                       size, spp, reps)}
-            for name in ("cornell", "heavy")]
+            for name in FLOOR_SCENES]
 
 
 def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5,
             seed: int = 0) -> dict[str, Any]:
     """The module docstring's timings (ns of thread CPU per path, best of ``reps``) on
-    ``bench``'s scene (the Cornell box or the heavy scene of
+    ``bench``'s scene (one of :data:`FLOOR_SCENES` of
     :func:`.profile_scenes.scene_bench`; ValueError where the whole-path kernel does not
     apply), the whole-path kernel's rays per path and the agreement of the two
     integrators."""
@@ -138,7 +143,7 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
     args = whole_paths.scene_args(sc, prep.tracer)
 
     def run_whole(record: bool) -> tuple[int, int]:
-        return whole_paths.lambert_paths(*args, keys, o, d, lamu, 4, depth, L, first_t,
+        return whole_paths.lambert_paths(*args, keys, o, d, lamu, 4, depth, True, L, first_t,
                                          record, log if record else whole_paths.NO_LOG)
 
     buffers: dict = {}
@@ -195,7 +200,7 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--scene", choices=("cornell", "heavy"), default="cornell")
+    ap.add_argument("--scene", choices=FLOOR_SCENES, default="cornell")
     ap.add_argument("--heavy-triangles", type=int, default=1_000_000)
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--spp", type=int, default=16)

@@ -1560,7 +1560,7 @@ def _section_path_floor(add, d) -> None:
         "relative, and the largest difference of a lane's mean in standard errors, are in "
         "the last rows.\n")
     by = {r["scene"]: r for r in rows}
-    names = [n for n in ("cornell", "heavy") if n in by]
+    names = [n for n in ("cornell", "heavy", "environment") if n in by]
     lines = [("wavefront integrator", "wavefront_ns", ".0f"),
              ("**whole-path kernel**", "whole_ns", ".0f"),
              ("whole paths ÷ wavefront", lambda r: r["whole_ns"] / r["wavefront_ns"], ".2f"),

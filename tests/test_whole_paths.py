@@ -1,5 +1,6 @@
 """core/render/whole_paths.py: whole paths in one kernel call for static Lambert scenes
-lit by emissive triangles.
+(flat or smooth-shaded, lit by emissive triangles, point, spot and sun lights, a constant
+sky or an environment map).
 
 Its estimator is the wavefront integrator's, with the same random numbers, so the two
 must give the same radiance path by path (to float32 rounding: a rounding difference may
@@ -15,6 +16,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 from relray.core.render import whole_paths
@@ -64,26 +66,96 @@ def differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
     return float(np.mean(np.any(np.abs(a - b) > tol, axis=1)))
 
 
-@pytest.mark.parametrize("spectral,beta", [("cie1931", 0.0), ("cie1931", 0.6),
-                                           ("rgb", 0.0)])
+def write_sky_map(path: Path) -> Path:
+    """A 32 × 16 map: a blue upper half, a brown lower half, a bright 1-texel sun."""
+    px = np.zeros((16, 32, 3), np.float32)  # row 0 = top (file order)
+    px[:8] = (0.3, 0.4, 0.6)
+    px[8:] = (0.1, 0.08, 0.05)
+    px[4, 12] = 400.0
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(32, 16, 3, oiio.FLOAT))
+    assert out.write_image(px)
+    out.close()
+    return path
+
+
+def environment_scene(tmp_path: Path, **render) -> dict:
+    """A grey ground, a smooth-shaded sphere (vertex normals) and a box under the map."""
+    write_sky_map(tmp_path / "sky.exr")
+    grey = {"name": "grey", "base_color": [0.6, 0.6, 0.6]}
+    return {
+        "render": {"width": 16, "height": 12, "spp": 8, "max_depth": 5, "seed": 3,
+                   "threads": 1, **render},
+        "camera": {"position": [0.0, -6.0, 2.5], "look_at": [0.0, 0.0, 0.6], "fov": 50.0},
+        "motion": {"beta": [0.0, 0.0, 0.0]},
+        "output": {"aovs": ["depth"]},
+        "scene": {"environment": {"file": "sky.exr"}},
+        "materials": [grey],
+        "objects": [
+            {"shape": "quad", "corners": [[-8, -8, 0], [8, -8, 0], [8, 8, 0], [-8, 8, 0]],
+             "material": "grey"},
+            {"shape": "sphere", "center": [-0.9, 0.3, 0.8], "radius": 0.8, "material": "grey",
+             "subdivisions": 2},
+            {"shape": "box", "center": [1.0, 0.5, 0.6], "size": [1.2, 1.2, 1.2],
+             "material": "grey"},
+        ],
+    }
+
+
+def _sky(data):
+    data["scene"]["background"] = [0.2, 0.3, 0.4]
+
+
+def _delta_lights(data):
+    data["lights"] = [
+        {"type": "point", "position": [0.3, 0.0, 1.5], "power": 10.0},
+        {"type": "spot", "position": [-0.3, 0.2, 1.8], "direction": [0.0, 0.0, -1.0],
+         "power": 20.0, "spot_size": 60.0},
+        {"type": "sun", "direction": [0.3, 0.5, -1.0], "power": 2.0}]
+
+
+def _transparent(data):
+    data["render"]["transparent"] = True
+
+
+def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
+    """A scene that takes whole paths: the Cornell box (plain, under a constant sky, or
+    with delta lights added) or :func:`environment_scene` (plain or on a transparent
+    film), moving towards the scene at ``beta`` (shifted lanes, aberration)."""
+    name, _, change = scene.partition("+")
+    data = environment_scene(tmp_path) if name == "environment" else cornell()
+    data["render"].update(spectral=spectral, spp=8)
+    data["motion"]["beta"] = [0.0, beta, 0.0]
+    if change:
+        {"sky": _sky, "delta_lights": _delta_lights, "transparent": _transparent}[change](data)
+    return data
+
+
+@pytest.mark.parametrize("scene,spectral,beta", [
+    ("cornell", "cie1931", 0.0), ("cornell", "cie1931", 0.6), ("cornell", "rgb", 0.0),
+    ("cornell+sky", "cie1931", 0.3), ("cornell+delta_lights", "cie1931", 0.0),
+    ("cornell+delta_lights", "rgb", 0.0), ("environment", "cie1931", 0.0),
+    ("environment", "cie1931", 0.6), ("environment", "rgb", 0.0),
+    ("environment+transparent", "cie1931", 0.0)])
 def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
-        tmp_path, spectral, beta):
-    data = cornell(spectral=spectral, spp=8)
-    data["motion"]["beta"] = [0.0, beta, 0.0]  # towards the box: shifted lanes, aberration
-    fr, ev = renderer(data, tmp_path)
+        tmp_path, scene, spectral, beta):
+    fr, ev = renderer(scene_data(tmp_path, scene, spectral, beta), tmp_path)
     assert fr.whole_paths
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth = fr.settings.max_depth
+    sky_seen = not fr.settings.transparent
     L1, t1, seg1 = whole_paths.trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(),
-                                     d.copy(), lamu, nlanes)
+                                     d.copy(), lamu, nlanes, sky_seen=sky_seen)
     L2, t2, seg2, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
-                            nlanes)
+                            nlanes, sky_seen=sky_seen)
     assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
     if nlanes == 3:
         assert np.all(L1[:, 3] == 0.0)
     assert differing(L1[:, :nlanes], L2[:, :nlanes]) <= 0.005
     np.testing.assert_array_equal(t1, t2)
     assert np.all(seg1 == -1) and np.all(seg2 == -1)
+    if not sky_seen:  # a camera ray that escapes sees nothing
+        assert np.all(L1[t1 >= 1e30] == 0.0) and np.any(t1 >= 1e30)
 
 
 def test_the_renderer_takes_whole_paths_where_they_apply_and_its_image_is_unchanged(
@@ -104,19 +176,20 @@ def _metal_walls(data):
     data["materials"][0]["roughness"] = 0.3
 
 
-def _sky(data):
-    data["scene"]["background"] = [0.2, 0.3, 0.4]
+def _glass_walls(data):
+    data["materials"][0]["transmission"] = 1.0
 
 
 def _moving_box(data):
     data["objects"][0]["velocity"] = [0.0, 0.0, 0.3]
 
 
-def _point_light(data):
-    data["lights"] = [{"type": "point", "position": [0.0, 0.0, 1.5], "power": 10.0}]
+def _area_light(data):
+    data["lights"] = [{"type": "area", "position": [0.0, 0.0, 1.5],
+                       "direction": [0.0, 0.0, -1.0], "size": [0.3, 0.3], "power": 10.0}]
 
 
-@pytest.mark.parametrize("change", [_metal_walls, _sky, _moving_box, _point_light])
+@pytest.mark.parametrize("change", [_metal_walls, _glass_walls, _moving_box, _area_light])
 def test_scenes_that_need_more_take_the_wavefront_integrator(tmp_path, change):
     data = cornell()
     change(data)

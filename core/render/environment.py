@@ -276,15 +276,27 @@ def env_lanes(tex, r, c, rgb, nm, lamu, base):
     lane's lab wavelength λ, else k · s(λ; c) · E. ``lamu``: the lanes' table columns,
     ``base``: E(λ) at them (the emission row), both 4-tuples. One call per lookup (not one per
     lane and texel), each lane's λ computed once."""
-    return _texel_lanes(tex, r, c, rgb, nm, _lane_lambdas(lamu, rgb), base)
+    return _texel_lanes(tex, r, c, rgb, nm, lane_lambdas(lamu, rgb), base)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def env_lanes_bilinear(tex, q, rgb, nm, lamu, base):
     """:func:`env_lanes` interpolated over the texels ``q`` of :func:`env_bilinear`:
     (1−fy)((1−fx) L[r0,c0] + fx L[r0,c1]) + fy((1−fx) L[r1,c0] + fx L[r1,c1]) per lane."""
+    return env_bilinear_at(tex, q, rgb, nm, lane_lambdas(lamu, rgb), base)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def env_texel_at(tex, r, c, rgb, nm, lam, base):
+    """:func:`env_lanes` with the lanes' wavelengths ``lam`` (nm, :func:`lane_lambdas`)
+    given: for a caller whose lanes do not change from lookup to lookup."""
+    return _texel_lanes(tex, r, c, rgb, nm, lam, base)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def env_bilinear_at(tex, q, rgb, nm, lam, base):
+    """:func:`env_lanes_bilinear` with the lanes' wavelengths ``lam`` given."""
     r0, r1, c0, c1, fy, fx = q
-    lam = _lane_lambdas(lamu, rgb)
     a = _mix(_texel_lanes(tex, r0, c0, rgb, nm, lam, base),
              _texel_lanes(tex, r0, c1, rgb, nm, lam, base), fx)
     b = _mix(_texel_lanes(tex, r1, c0, rgb, nm, lam, base),
@@ -300,7 +312,7 @@ def _mix(a, b, f):
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _lane_lambdas(lamu, rgb):
+def lane_lambdas(lamu, rgb):
     """λ (nm) of the four lanes' table columns (rgb lanes: unused zeros)."""
     if rgb:
         return (0.0, 0.0, 0.0, 0.0)

@@ -1,30 +1,36 @@
-"""Whole paths in one kernel call, for the scenes that need nothing but Lambert surfaces
-lit by emissive triangles (issue 12: skip what a scene does not need).
+"""Whole paths in one kernel call, for the static scenes whose surfaces are all Lambert
+(issue 12: skip what a scene does not need).
 
 The wavefront integrator (:func:`.integrator.trace`) carries every path's state in
 arrays from bounce to bounce, returns to Python between bounces, and runs one general
 kernel (:func:`.integrator.shade`: the principled material's lobes, textures, moving
-bodies, the environment map, the denoising features). A static scene whose materials are
-all pure Lambert (diffuse weight 1, no metal or glass lobe), with no textures, no vertex
-normals, no sky or map and no light but its emissive triangles (:func:`applies`) needs
-none of that: :func:`lambert_paths` traces each path to its end in one loop, Embree's
-``rtcIntersect1``/``rtcOccluded1`` called from the kernel and the path's state in
-registers.
+bodies, area-light quads, the denoising features). A static scene whose materials are
+all pure Lambert (diffuse weight 1, no metal or glass lobe), with no textures and no
+area-light quads (:func:`applies`), needs none of that: :func:`lambert_paths` traces
+each path to its end in one loop, Embree's ``rtcIntersect1``/``rtcOccluded1`` called
+from the kernel and the path's state in registers. Its surfaces may be flat or smooth
+(interpolated vertex normals), its lights emissive triangles, point, spot and sun lights,
+a constant sky or an environment map.
 
 The estimator is the wavefront integrator's, sample for sample, in the lab frame
 (accelerator coordinates; the camera stage has already aberrated the rays and shifted
-the lanes):
+the lanes). At a hit, n is the shading normal (the interpolated vertex normal on the
+ray's side, :func:`.integrator.shading_normal`; else g), g the geometric normal turned
+towards the ray:
 
-- at a hit, the emission of a front face (or any face of a two-sided emitter) times the
+- the emission of a front face (or any face of a two-sided emitter) times the
   throughput, with the power heuristic against next-event estimation,
   w = p_bsdf² / (p_bsdf² + p_light²), p_light = p_sel t² / (A |cos θ_y|), except for the
   camera ray (w = 1);
-- next-event estimation: a triangle light picked by the light CDF (its number reused for
-  the point), a uniform point y on it, contribution thr ρ/π cos θ_i · w / p_light · L_e
-  with w = p_light² / (p_light² + p_bsdf²), p_bsdf = cos θ_i / π, if the shadow ray is
+- a ray that escapes sees the sky (w against p_light = p_sel / 4π) or the map (w against
+  p_sel · pdf(ω); the camera ray: w = 1 and the bilinear lookup), :func:`miss_radiance`;
+- next-event estimation: a light picked by the light CDF (its number reused on the
+  light), sampled by :func:`.lights.sample_light` or, for the map,
+  :func:`.environment.env_light_sample`; contribution thr ρ/π cos θ_i · w · scale /
+  p_light · L_e with cos θ_i = wi·n, w = p_light² / (p_light² + p_bsdf²) (1 for a delta
+  light), p_bsdf = cos θ_i / π, if wi·g > 0 and the shadow ray (offset along g) is
   unblocked;
-- the continuation cosine-weighted about the normal turned towards the ray (two-sided
-  Lambert), throughput × ρ(λ) per lane;
+- the continuation cosine-weighted about n (refused below g), throughput × ρ(λ) per lane;
 - Russian roulette from ``integrator.RR_DEPTH`` on the lanes' largest throughput;
 - the same random numbers (:mod:`.sampling`'s dimension layout), light selection, ray
   offsets and spectral table lookups.
@@ -44,6 +50,14 @@ from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
 from .accel import MISS_DISTANCE, Accel
 from .embree import intersect1, occluded1, rayhit_buffer
+from .environment import (
+    env_bilinear,
+    env_bilinear_at,
+    env_light_sample,
+    env_texel_at,
+    env_texel_pdf,
+    lane_lambdas,
+)
 from .integrator import (
     FAST_MATH,
     RR_DEPTH,
@@ -51,9 +65,12 @@ from .integrator import (
     column,
     face_forward,
     lerp,
+    lerp_at,
     offset_point,
+    shading_normal,
     shadow_ray,
     surface_point,
+    vertex_normal,
     wavefront_buffers,
 )
 from .sampling import (
@@ -68,7 +85,6 @@ from .sampling import (
     rescale_uniform,
     sobol2,
     to_world,
-    uniform_triangle,
 )
 
 _INV_PI = 1.0 / math.pi
@@ -80,25 +96,25 @@ NO_LOG = (np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32),
 
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     """Whether :func:`lambert_paths` can trace the scene ``sc`` (module docstring): a
-    static BVH (``accel`` an :class:`.accel.Accel`), pure Lambert materials, no textures,
-    vertex normals, sky, map or area-light quads, only triangle lights, and no denoising
-    features asked for."""
+    static BVH (``accel`` an :class:`.accel.Accel`), pure Lambert materials, no textures
+    and no area-light quads, and no denoising features asked for."""
     w = np.asarray(sc.mat_w)
     return (isinstance(accel, Accel) and not features and not sc.tex.enabled
-            and not sc.has_vn and sc.sky_row < 0 and not sc.env_on
             and len(sc.area_tris) == 0 and len(w) > 0
-            and bool(np.all(w[:, 0] == 1.0) and np.all(w[:, 1:] == 0.0))
-            and bool(np.all(np.asarray(sc.l_kind) == lightmod.TRIANGLE)))
+            and bool(np.all(w[:, 0] == 1.0) and np.all(w[:, 1:] == 0.0)))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
-def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, one_sided,
-                  l_prim, l_scale, l_cdf, tri_pmf, eps_base, keys, o, d, lamu, nlanes,
-                  max_depth, L, first_t, record, log):  # pragma: no cover - compiled
+def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit, emit_row,
+                  one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot, l_cdf,
+                  tri_pmf, sky_pmf, sky_row, env_on, env_tex, env_marg, env_cond, env_pmf,
+                  env_rot, env_row, env_nm, eps_base, keys, o, d, lamu, nlanes, max_depth,
+                  sky_seen, L, first_t, record, log):  # pragma: no cover - compiled
     """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
-    ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``) to its end: its lab
-    radiance per lane into ``L[i]`` (lanes ≥ nlanes 0), the camera ray's hit distance
-    into ``first_t[i]`` (1e30: none). The scene arguments are those of
+    ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
+    its end: its lab radiance per lane into ``L[i]`` (lanes ≥ nlanes 0), the camera ray's
+    hit distance into ``first_t[i]`` (1e30: none). ``sky_seen`` False (a transparent
+    film) hides the sky or map from camera rays. The scene arguments are those of
     :func:`scene_args`, in its order (``handle``: the static BVH's Embree scene; the
     others :class:`.integrator.KernelScene`'s fields).
 
@@ -109,6 +125,7 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
     f, w, addr = rayhit_buffer()
     rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
     top = emit.shape[1] - 1
+    rgb = nlanes == 3
     li = np.zeros(4, np.int64)
     lf = np.zeros(4, np.float64)
     thr = np.zeros(4, np.float64)
@@ -122,6 +139,13 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
         for j in range(nlanes):
             li[j], lf[j] = column(lamu[i, j], top)
             thr[j] = 1.0
+        # the map's lookups: the lanes' λ and E(λ), fixed along a path in a static scene
+        lam4 = base4 = (0.0, 0.0, 0.0, 0.0)
+        if env_on:
+            lu4 = (np.float64(lamu[i, 0]), np.float64(lamu[i, 1]), np.float64(lamu[i, 2]),
+                   np.float64(lamu[i, 3]))
+            lam4 = lane_lambdas(lu4, rgb)
+            base4 = env_base(emit, env_row, lu4, top, nlanes)
         ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         first_t[i] = MISS_DISTANCE
@@ -134,12 +158,19 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
                 rec_d[n_rays, 0], rec_d[n_rays, 1], rec_d[n_rays, 2] = dx, dy, dz
             n_rays += 1
             t, tri, b1, b2 = intersect1(handle, f, w, addr, ox, oy, oz, dx, dy, dz, MISS_DISTANCE)
-            if tri < 0:
+            if tri < 0:  # the sky or the map (none: black)
+                if depth > 0 or sky_seen:
+                    miss_radiance(L, i, thr, li, lf, lam4, base4, nlanes, rgb, depth,
+                                  prev_pdf, emit, sky_pmf, sky_row, env_on, env_tex, env_pmf,
+                                  env_rot, env_nm, dx, dy, dz)
                 break
             if depth == 0:
                 first_t[i] = t
             p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
-            n, front, cos_g = face_forward(g, np.float64(dx), np.float64(dy), np.float64(dz))
+            g, front, cos_g = face_forward(g, np.float64(dx), np.float64(dy), np.float64(dz))
+            n = g  # the shading normal (interpolated vertex normals), g the geometric one
+            if has_vn:
+                n = shading_normal(vertex_normal(vn, tri, b1, b2), g, dx, dy, dz)
             m = tri_mat[tri]
             er = emit_row[m]
             if er >= 0 and (front or one_sided[m] == 0):
@@ -158,24 +189,23 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
             if l_cdf.shape[0] > 1:
                 u_a, u2 = sobol2(key, bounce_dim(depth, DIM_LIGHT))
                 k, p_sel, lo = lightmod.select(l_cdf, u_a)
-                lt = l_prim[k]
-                s1, s2 = uniform_triangle(rescale_uniform(u_a, lo, p_sel), u2)
-                qx = v0[lt, 0] + s1 * e1[lt, 0] + s2 * e2[lt, 0] - p[0]
-                qy = v0[lt, 1] + s1 * e1[lt, 1] + s2 * e2[lt, 1] - p[1]
-                qz = v0[lt, 2] + s1 * e1[lt, 2] + s2 * e2[lt, 2] - p[2]
-                dist = math.sqrt(qx * qx + qy * qy + qz * qz)
-                wi = (qx / dist, qy / dist, qz / dist)
-                cos_l = -(ng[lt, 0] * wi[0] + ng[lt, 1] * wi[1] + ng[lt, 2] * wi[2])
+                u1 = rescale_uniform(u_a, lo, p_sel)
+                is_env = l_kind[k] == lightmod.ENV
+                texel = (0, 0)
+                if is_env:
+                    (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
+                        env_marg, env_cond, env_pmf, env_rot, p_sel, u1, u2)
+                else:
+                    wi, p_l, scale, delta, finite, target, ok = lightmod.sample_light(
+                        lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot,
+                                              v0, e1, e2, ng, area, tri_mat, one_sided),
+                        p_sel, u1, u2, p[0], p[1], p[2], eps)
                 cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
-                lm = tri_mat[lt]
-                if cos_i > 0.0 and (cos_l > 0.0 or (one_sided[lm] == 0 and cos_l < 0.0)):
-                    p_l = p_sel * dist * dist / (area[lt] * abs(cos_l) + 1e-30)
-                    c = power_heuristic(p_l, cos_i * _INV_PI) * cos_i * l_scale[k] / p_l \
-                        * _INV_PI
-                    lift = eps if cos_l > 0.0 else -eps
-                    target = (p[0] + qx + ng[lt, 0] * lift, p[1] + qy + ng[lt, 1] * lift,
-                              p[2] + qz + ng[lt, 2] * lift)
-                    so, sd, st = shadow_ray(p, n, eps, target, wi, True)
+                if ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0 \
+                        and wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] > 0.0:
+                    c = (1.0 if delta else power_heuristic(p_l, cos_i * _INV_PI)) * cos_i \
+                        * scale / p_l * _INV_PI
+                    so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
                     fo = (np.float32(so[0]), np.float32(so[1]), np.float32(so[2]))
                     fd = (np.float32(sd[0]), np.float32(sd[1]), np.float32(sd[2]))
                     if record:
@@ -185,10 +215,17 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
                     n_sh += 1
                     if not occluded1(handle, f, w, addr, fo[0], fo[1], fo[2], fd[0], fd[1],
                                      fd[2], np.float32(st)):
-                        row = emit_row[lm]
-                        for j in range(nlanes):
-                            L[i, j] += thr[j] * rho[j] * c * lerp(emit, row, li[j], lf[j])
-            # the continuation: cosine-weighted about the turned normal, weight ρ
+                        if is_env:
+                            v4 = env_texel_at(env_tex, texel[0], texel[1], rgb, env_nm, lam4,
+                                              base4)
+                            for j in range(nlanes):
+                                L[i, j] += thr[j] * rho[j] * c * v4[j]
+                        else:
+                            row = l_row[k]
+                            for j in range(nlanes):
+                                L[i, j] += thr[j] * rho[j] * c * lerp(emit, row, li[j], lf[j])
+            # the continuation: cosine-weighted about the shading normal (refused below
+            # the geometric one), weight ρ
             u1, u2 = sobol2(key, bounce_dim(depth, DIM_BSDF))
             if record:
                 bounces[i] += 1
@@ -196,7 +233,7 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
             tb, bb = onb(n[0], n[1], n[2])
             wx, wy, wz = to_world(lx, ly, lz, tb, bb, n[0], n[1], n[2])
             prev_pdf = lz * _INV_PI
-            if prev_pdf <= 0.0:
+            if prev_pdf <= 0.0 or (has_vn and wx * g[0] + wy * g[1] + wz * g[2] <= 0.0):
                 break
             q = 0.0
             for j in range(nlanes):
@@ -207,10 +244,51 @@ def lambert_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, o
                     break
                 for j in range(nlanes):
                     thr[j] /= q
-            on = offset_point(p, n, eps, 1.0)
+            on = offset_point(p, g, eps, 1.0)
             ox, oy, oz = np.float32(on[0]), np.float32(on[1]), np.float32(on[2])
             dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
     return n_rays, n_sh
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def env_base(emit, env_row, lu4, top, nlanes):
+    """E(λ) of the map's emission row at the lanes' table coordinates ``lu4`` (the
+    fourth 0 in the rgb mode): :func:`.environment.env_lanes`' ``base``."""
+    return (lerp_at(emit, env_row, lu4[0], top), lerp_at(emit, env_row, lu4[1], top),
+            lerp_at(emit, env_row, lu4[2], top),
+            lerp_at(emit, env_row, lu4[3], top) if nlanes == 4 else 0.0)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def miss_radiance(L, i, thr, li, lf, lam4, base4, nlanes, rgb, depth, prev_pdf, emit, sky_pmf,
+                  sky_row, env_on, env_tex, env_pmf, env_rot, env_nm, dx, dy, dz):
+    """Add to ``L[i]`` what a ray that escaped in the lab direction (dx, dy, dz) sees,
+    times the throughput: the constant sky (row ``sky_row`` ≥ 0) or the map (``env_on``;
+    the lanes' λ ``lam4`` and the map's E(λ) ``base4``), MIS-weighted against next-event
+    estimation, w = p_bsdf² / (p_bsdf² + p_light²) with p_light = p_sel / 4π (sky) or
+    p_sel · pdf(ω) (map, :func:`.environment.env_texel_pdf`), except for the camera ray
+    (depth 0: w = 1, the map looked up bilinearly, as :func:`.integrator.shade` does
+    after a delta bounce)."""
+    if sky_row >= 0:
+        wt = 1.0
+        if depth > 0 and sky_pmf > 0.0:
+            wt = power_heuristic(prev_pdf, lightmod.sky_light_pdf(sky_pmf))
+        for j in range(nlanes):
+            L[i, j] += thr[j] * wt * lerp(emit, sky_row, li[j], lf[j])
+    elif env_on:
+        if depth == 0:
+            v4 = env_bilinear_at(env_tex, env_bilinear(env_tex, env_rot, dx, dy, dz), rgb,
+                                 env_nm, lam4, base4)
+            for j in range(nlanes):
+                L[i, j] += thr[j] * v4[j]
+        else:
+            r_e, c_e, p_e = env_texel_pdf(env_pmf, env_rot, dx, dy, dz)
+            wt = 1.0
+            if sky_pmf > 0.0:
+                wt = power_heuristic(prev_pdf, sky_pmf * p_e)
+            v4 = env_texel_at(env_tex, r_e, c_e, rgb, env_nm, lam4, base4)
+            for j in range(nlanes):
+                L[i, j] += thr[j] * wt * v4[j]
 
 
 _BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int32))
@@ -218,23 +296,27 @@ _BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int3
 
 def scene_args(sc: KernelScene, accel: Accel) -> tuple:
     """The scene arguments of :func:`lambert_paths`, in its order."""
-    return (accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.tri_mat, sc.refl, sc.emit,
-            sc.mat_emit_row, sc.mat_one_sided, sc.l_prim, sc.l_scale, sc.l_cdf, sc.tri_pmf,
-            sc.eps)
+    return (accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
+            sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
+            sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
+            sc.sky_pmf, sc.sky_row, sc.env_on, sc.env_tex, sc.env_marg, sc.env_cond,
+            sc.env_pmf, sc.env_rot, sc.env_row, sc.env_nm, sc.eps)
 
 
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
-          buffers: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          sky_seen: bool = True, buffers: dict | None = None
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`.integrator.trace` for a scene where :func:`applies`: (L (N, 4) lab radiance,
     the camera rays' hit distances (1e30: none), their moving segments (all -1)), the
     arrays kept in ``buffers`` until its next use (:func:`.integrator.wavefront_buffers`).
     ``o_local``/``d`` float32 (N, 3) camera rays in accelerator coordinates, ``lamu`` the
-    lanes' table coordinates (N, 4)."""
+    lanes' table coordinates (N, 4); ``sky_seen`` False hides the sky or map from the
+    camera rays (a transparent film)."""
     n = len(keys)
     b = wavefront_buffers(n, buffers, _BUFFERS)
     b["seg"][:] = -1
     lambert_paths(*scene_args(sc, accel), keys, np.ascontiguousarray(o_local, np.float32),
                   np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-                  nlanes, max_depth, b["L"], b["first_t"], False, NO_LOG)
+                  nlanes, max_depth, sky_seen, b["L"], b["first_t"], False, NO_LOG)
     return b["L"], b["first_t"], b["seg"]
