@@ -56,8 +56,6 @@ from relray.core.render.sampling import (
     DIM_LIGHT,
     DIM_ROULETTE,
     bounce_dim,
-    path_keys,
-    progressive_offsets,
     rand,
     sobol2,
 )
@@ -84,19 +82,14 @@ def draw_numbers(keys, bounces):  # pragma: no cover - compiled
 
 
 def camera_stage(bench: cm.RelrayBench, size: int, spp: int, seed: int = 0):
-    """relray's camera and spectral stages for every path of frame 1 (size², spp):
-    (renderer, keys, origins, directions, lanes' table coordinates)."""
-    fr = bench.renderer(spp=spp, width=size, height=size, threads=1)
-    prep, ev = fr.prep, bench.event(None)
+    """relray's camera and spectral stages for every path of frame 1 (size², spp, the
+    render seed ``seed``; :meth:`FrameRenderer.camera_paths`): (renderer, keys, origins,
+    directions, lanes' table coordinates)."""
+    fr = bench.renderer(spp=spp, width=size, height=size, threads=1, seed=seed)
     pix = np.repeat(np.arange(size * size, dtype=np.int64), spp)
     samp = np.tile(np.arange(spp, dtype=np.int64), size * size)
-    keys = path_keys(seed, 1, pix, samp)
-    o, d, D, _ = fr.camera.primary_rays(ev.beta, keys, pix,
-                                        np.asarray(ev.x, np.float64) - prep.origin,
-                                        prep.radius)
-    lanes = fr.sampler.lanes(progressive_offsets(seed, 1, pix, samp), D, doppler=fr.doppler,
-                             searchlight=fr.searchlight)
-    return fr, keys, o, d, np.ascontiguousarray(lanes.lamu)
+    cp = fr.camera_paths(bench.event(None), 1, pix, samp)
+    return fr, cp.keys, cp.o, cp.d, np.ascontiguousarray(cp.lamu)
 
 
 def agreement_z(a: np.ndarray, b: np.ndarray) -> float:

@@ -22,7 +22,6 @@ import pytest
 from relray.core.render import whole_paths
 from relray.core.render.frames import build_renderer
 from relray.core.render.integrator import trace
-from relray.core.render.sampling import path_keys, progressive_offsets
 from relray.core.scene.job import parse_job
 from relray.core.scene.motion import frame_events
 
@@ -42,21 +41,13 @@ def renderer(data: dict, tmp_path: Path):
 
 
 def camera_paths(fr, ev, spp: int):
-    """The camera stage of every path of the frame, as the renderer's chunks make it:
+    """The camera stage of every path of frame 1 (:meth:`FrameRenderer.camera_paths`):
     (keys, origins, directions, lanes' table coordinates, lanes)."""
     n_pix = fr.camera.width * fr.camera.height
     pix = np.repeat(np.arange(n_pix, dtype=np.int64), spp)
     samp = np.tile(np.arange(spp, dtype=np.int64), n_pix)
-    keys = path_keys(fr.settings.seed, 1, pix, samp)
-    o, d, D, _ = fr.camera.primary_rays(ev.beta, keys, pix,
-                                        np.asarray(ev.x, np.float64) - fr.prep.origin,
-                                        fr.prep.radius)
-    if fr.rgb_mode:
-        lamu = np.tile(np.array([0.0, 1.0, 2.0, 0.0], np.float32), (len(keys), 1))
-        return keys, o, d, lamu, 3
-    lanes = fr.sampler.lanes(progressive_offsets(fr.settings.seed, 1, pix, samp), D,
-                             doppler=fr.doppler, searchlight=fr.searchlight)
-    return keys, o, d, np.ascontiguousarray(lanes.lamu), 4
+    cp = fr.camera_paths(ev, 1, pix, samp)
+    return cp.keys, cp.o, cp.d, np.ascontiguousarray(cp.lamu), cp.nlanes
 
 
 def differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:

@@ -23,6 +23,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -63,6 +64,22 @@ CHUNK_BUFFERS = (("pix", 0, np.int64), ("samp", 0, np.int64), ("sensor", 3, np.f
                  ("lam", 4, np.float64), ("pdf", 4, np.float64), ("lamu", 4, np.float32),
                  ("w_d", 0, np.float64))
 ESCAPED_DEPTH = 1e10
+
+
+class CameraPaths(NamedTuple):
+    """:meth:`FrameRenderer.camera_paths`: what the integrators start from."""
+    keys: np.ndarray      # uint64 (N,) the paths' random-number keys
+    o: np.ndarray         # float32 (N, 3) camera ray origins, accelerator coordinates
+    d: np.ndarray         # float32 (N, 3) unit lab directions
+    D: np.ndarray         # (N,) the camera's Doppler factor ν_camera/ν_lab per ray
+    skipped: np.ndarray   # the distance skipped before the origin (far cameras)
+    lam: np.ndarray       # (N, 4) hero wavelengths, nm (rgb mode: 0)
+    pdf: np.ndarray       # (N, 4) their pdfs
+    lamu: np.ndarray      # float32 (N, 4) lab table coordinates
+    w_d: np.ndarray       # (N,) the searchlight weight D⁵ (1 without)
+    d_min: float
+    d_max: float
+    nlanes: int           # 4 hero lanes, 3 in the rgb mode
 
 
 @dataclass
@@ -339,6 +356,37 @@ class FrameRenderer:
                                                     event))
         film.add_layer(splats.pixel, splats.sensor, splats.bands)
 
+    def camera_paths(self, event: relativity.ShutterEvent, frame: int, pix: np.ndarray,
+                     samp: np.ndarray, out: tuple[np.ndarray, ...] | None = None
+                     ) -> CameraPaths:
+        """The camera stage of the paths (pixel ``pix[i]``, sample ``samp[i]``) of
+        ``frame`` at ``event``: their keys, camera rays (float32 lab directions, origins
+        in accelerator coordinates) with the camera's Doppler factors D and skipped
+        distances, and hero lanes (λ, pdf, table coordinates shifted by D, D⁵ weight; the
+        rgb mode: columns 0..2 of the RGB tables, w_d = 1), what the integrators start
+        from. ``out``: (λ, pdf, table coordinates, w_d) arrays to fill (else new)."""
+        s = self.settings
+        n = len(pix)
+        keys = path_keys(s.seed, frame, pix, samp)
+        camera = self.camera if event.rotation is None else \
+            replace(self.camera, rotation=event.rotation)
+        o, d, D, skipped = camera.primary_rays(
+            event.beta, keys, pix, np.asarray(event.x, np.float64) - self.prep.origin,
+            self.prep.radius)
+        if out is None:
+            out = (np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4), np.float32),
+                   np.empty(n))
+        if self.rgb_mode:  # columns 0..2 of the RGB tables; w_d = 1 (no searchlight)
+            lam, pdf, lamu, w_d = out
+            lam[:], pdf[:], lamu[:], w_d[:] = 0.0, 1.0, (0.0, 1.0, 2.0, 0.0), 1.0
+            d_min, d_max = (float(D.min()), float(D.max())) if n else (math.inf, 0.0)
+            return CameraPaths(keys, o, d, D, skipped, lam, pdf, lamu, w_d, d_min, d_max, 3)
+        u = progressive_offsets(s.seed, frame, pix, samp)
+        # hero λ, pdf, table coordinates (Doppler-shifted), D⁵ and D's range: one pass
+        lam, pdf, lamu, w_d, d_min, d_max = self.sampler.lanes(
+            u, D, doppler=self.doppler, searchlight=self.searchlight, out=out)
+        return CameraPaths(keys, o, d, D, skipped, lam, pdf, lamu, w_d, d_min, d_max, 4)
+
     def _trace_chunk(self, event, frame, pixels, s0, s1, film, lock, stats):
         s = self.settings
         prep = self.prep
@@ -352,27 +400,13 @@ class FrameRenderer:
         pix, samp = b["pix"], b["samp"]
         pix.reshape(len(pixels), n_s)[:] = pixels[:, None]
         samp.reshape(len(pixels), n_s)[:] = np.arange(s0, s1, dtype=np.int64)
-        keys = path_keys(s.seed, frame, pix, samp)
-        camera = self.camera if event.rotation is None else \
-            replace(self.camera, rotation=event.rotation)
-        o_local, d_lab, D, skipped = camera.primary_rays(
-            event.beta, keys, pix, np.asarray(event.x, np.float64) - prep.origin,
-            prep.radius)
-        lanes = (b["lam"], b["pdf"], b["lamu"], b["w_d"])
-        if self.rgb_mode:  # columns 0..2 of the RGB tables; w_d = 1 (no searchlight)
-            lam, pdf, lamu, w_d = lanes
-            lam[:], pdf[:], lamu[:], w_d[:] = 0.0, 1.0, (0.0, 1.0, 2.0, 0.0), 1.0
-            d_min, d_max = (float(D.min()), float(D.max())) if n else (math.inf, 0.0)
-            nlanes = 3
-        else:
-            u = progressive_offsets(s.seed, frame, pix, samp)
-            # hero λ, pdf, table coordinates (Doppler-shifted), D⁵ and D's range: one pass
-            lam, pdf, lamu, w_d, d_min, d_max = self.sampler.lanes(
-                u, D, doppler=self.doppler, searchlight=self.searchlight, out=lanes)
-            nlanes = 4
+        cp = self.camera_paths(event, frame, pix, samp,
+                               (b["lam"], b["pdf"], b["lamu"], b["w_d"]))
+        keys, o_local, d_lab, D, skipped = cp.keys, cp.o, cp.d, cp.D, cp.skipped
+        lam, pdf, lamu, w_d, nlanes = cp.lam, cp.pdf, cp.lamu, cp.w_d, cp.nlanes
         spread = 0.0
         if self.kernel.tex.enabled:  # the ray cones' start (textures.py)
-            spread = lab_spread(pixel_spread(camera.tan_half_fov, camera.height), D)
+            spread = lab_spread(pixel_spread(self.camera.tan_half_fov, self.camera.height), D)
         feats = None
         if self.whole_paths:
             L, t_hit, seg = whole_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
@@ -405,8 +439,8 @@ class FrameRenderer:
             film.add_samples(pix, sensor, alpha, aov,
                              lam if self.bands else None, lam_weight if self.bands else None)
             stats.paths += n
-            stats.d_min = min(stats.d_min, d_min)
-            stats.d_max = max(stats.d_max, d_max)
+            stats.d_min = min(stats.d_min, cp.d_min)
+            stats.d_max = max(stats.d_max, cp.d_max)
         self._chunk_buffers.append(keep)
 
 
