@@ -259,7 +259,7 @@ def env_base(emit, env_row, lu4, top, nlanes):
             lerp_at(emit, env_row, lu4[3], top) if nlanes == 4 else 0.0)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def miss_radiance(L, i, thr, li, lf, lam4, base4, nlanes, rgb, depth, prev_pdf, emit, sky_pmf,
                   sky_row, env_on, env_tex, env_pmf, env_rot, env_nm, dx, dy, dz):
     """Add to ``L[i]`` what a ray that escaped in the lab direction (dx, dy, dz) sees,
