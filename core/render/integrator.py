@@ -513,9 +513,11 @@ def lab_normal(n, h, ig):
     return x * inv, y * inv, z * inv
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def lerp_at(table, row, u, top):
-    """table[row] linearly interpolated at the column u (clamped to [0, top])."""
+    """table[row] linearly interpolated at the column u (clamped to [0, top]). Compiled
+    apart and without reference counting (a call then passes ``table`` without atomic
+    reference-count updates)."""
     i, f = column(u, top)
     return lerp(table, row, i, f)
 

@@ -349,7 +349,10 @@ def wrap_index(i, n, mode):
 # slot_texel, which shade calls without inlining it (its five call sites made up a third
 # of shade's compile time, issue 12); slot_texel runs without numba's reference counting
 # (``_nrt=False``: it allocates nothing and only reads the arrays its caller holds), so
-# the call passes the arrays without atomic reference-count updates.
+# the call passes the arrays without atomic reference-count updates. So do the other
+# functions shade calls per textured hit (triangle_uv, normal_mapped, texel_reflectance,
+# texel_emission): compiled with reference counting, each call counted its array
+# arguments up and down again (6 % of the textured scene's time, perf).
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
@@ -425,7 +428,7 @@ def channel(t, c):
     return t[3]
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def triangle_uv(tri_uv, tri, b1, b2):
     """The UV at barycentrics (b1, b2) of triangle ``tri`` and its UV edges
     (uv1 - uv0, uv2 - uv0)."""
@@ -445,7 +448,7 @@ def hit_lod(duv1, duv2, area, width, cos_g):
         max(width, 1e-30) / max(abs(cos_g), MIN_COS))
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     """The normal of a tangent-space normal map's texel (r, g, b) ∈ [0, 1]³ at a hit
     whose interpolated (or geometric) normal is ``n0`` (on the triangle's front side):
@@ -487,7 +490,7 @@ def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
             sx * tz_ + sy * cz + sz * nz)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def texel_reflectance(rgb, rgb_mode, cscale, cdata, lamu, pi, uv_over, ir_over, nlanes,
                       rho):
     """ρ of a base-colour texel (linear Rec.709 ``rgb`` in [0, 1]) for each hero lane of
@@ -515,7 +518,7 @@ def texel_reflectance(rgb, rgb_mode, cscale, cdata, lamu, pi, uv_over, ir_over, 
             rho[j] = cell_reflectance(cdata, cell, lam)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def texel_emission(r, g, b, cscale, cdata, lamu, pi, j):
     """scale · s(λ) of an emission texel (r, g, b) (linear Rec.709 radiance, ≥ 0) at the
     wavelength of lane j of path ``pi``: an RGB emitter (physics.md) is
