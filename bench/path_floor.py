@@ -134,10 +134,12 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
            np.empty((n * depth, 3), np.float32), np.empty((n * depth, 3), np.float32),
            np.empty(n * depth, np.float32), np.zeros(n, np.int64))
     args = whole_paths.scene_args(sc, prep.tracer)
+    spread = np.zeros(n, np.float32)  # (untextured scenes: no ray cones)
 
     def run_whole(record: bool) -> tuple[int, int]:
-        return whole_paths.lambert_paths(*args, keys, o, d, lamu, 4, depth, True, L, first_t,
-                                         record, log if record else whole_paths.NO_LOG)
+        return whole_paths.lambert_paths(*args, keys, o, d, lamu, spread, 4, depth, True, L,
+                                         first_t, record,
+                                         log if record else whole_paths.NO_LOG)
 
     buffers: dict = {}
 

@@ -1,6 +1,6 @@
 """core/render/whole_paths.py: whole paths in one kernel call for static Lambert scenes
-(flat or smooth-shaded, lit by emissive triangles, point, spot and sun lights, a constant
-sky or an environment map).
+(flat or smooth-shaded, textured or not, lit by emissive triangles, point, spot and sun
+lights, a constant sky or an environment map).
 
 Its estimator is the wavefront integrator's, with the same random numbers, so the two
 must give the same radiance path by path (to float32 rounding: a rounding difference may
@@ -109,6 +109,38 @@ def _transparent(data):
     data["render"]["transparent"] = True
 
 
+def write_texture(path: Path, pixels) -> str:
+    """An EXR of ``pixels`` (H, W, C), top row first; returns its file name."""
+    px = np.ascontiguousarray(np.asarray(pixels, np.float32))
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2],
+                                              oiio.FLOAT))
+    assert out.write_image(px)
+    out.close()
+    return path.name
+
+
+def _textures(data, folder: Path):
+    """A base-colour checker on the white surfaces, a roughness map and a tilted normal
+    map on the red and green walls, a glowing texture on the blocks (emission)."""
+    ij = np.indices((8, 8)).sum(axis=0) % 2
+    checker = np.where(ij[..., None] == 1, [0.8, 0.7, 0.2], [0.1, 0.3, 0.6])
+    tilt = np.tile([0.75, 0.5, 0.93], (4, 4, 1))
+    glow = np.tile(np.linspace(0.0, 2.0, 8)[:, None, None] * [1.0, 0.5, 0.2], (1, 8, 1))
+    mats = {m["name"]: m for m in data["materials"]}
+    mats["white"]["base_color_texture"] = write_texture(folder / "checker.exr", checker)
+    for wall in ("red", "green"):
+        mats[wall]["roughness_texture"] = write_texture(folder / "rough.exr",
+                                                        np.full((4, 4, 1), 0.4))
+        mats[wall]["normal_texture"] = write_texture(folder / "tilt.exr", tilt)
+    data["materials"].append({"name": "glow", "base_color": [0.5, 0.5, 0.5],
+                              "emission_texture": write_texture(folder / "glow.exr", glow),
+                              "emission_strength": 0.5})
+    for o in data["objects"]:
+        if o["name"] in ("short_block", "tall_block"):
+            o["material"] = "glow"
+
+
 def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     """A scene that takes whole paths: the Cornell box (plain, under a constant sky, or
     with delta lights added) or :func:`environment_scene` (plain or on a transparent
@@ -117,7 +149,9 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     data = environment_scene(tmp_path) if name == "environment" else cornell()
     data["render"].update(spectral=spectral, spp=8)
     data["motion"]["beta"] = [0.0, beta, 0.0]
-    if change:
+    if change == "textures":
+        _textures(data, tmp_path)
+    elif change:
         {"sky": _sky, "delta_lights": _delta_lights, "transparent": _transparent}[change](data)
     return data
 
@@ -127,7 +161,8 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     ("cornell+sky", "cie1931", 0.3), ("cornell+delta_lights", "cie1931", 0.0),
     ("cornell+delta_lights", "rgb", 0.0), ("environment", "cie1931", 0.0),
     ("environment", "cie1931", 0.6), ("environment", "rgb", 0.0),
-    ("environment+transparent", "cie1931", 0.0)])
+    ("environment+transparent", "cie1931", 0.0), ("cornell+textures", "cie1931", 0.0),
+    ("cornell+textures", "cie1931", 0.6), ("cornell+textures", "rgb", 0.0)])
 def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
         tmp_path, scene, spectral, beta):
     fr, ev = renderer(scene_data(tmp_path, scene, spectral, beta), tmp_path)
@@ -135,10 +170,11 @@ def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth = fr.settings.max_depth
     sky_seen = not fr.settings.transparent
+    spread = 0.01  # the ray cones' start (textures' level of detail)
     L1, t1, seg1 = whole_paths.trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(),
-                                     d.copy(), lamu, nlanes, sky_seen=sky_seen)
+                                     d.copy(), lamu, nlanes, sky_seen=sky_seen, spread=spread)
     L2, t2, seg2, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
-                            nlanes, sky_seen=sky_seen)
+                            nlanes, sky_seen=sky_seen, spread=spread)
     assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
     if nlanes == 3:
         assert np.all(L1[:, 3] == 0.0)
@@ -180,10 +216,26 @@ def _area_light(data):
                        "direction": [0.0, 0.0, -1.0], "size": [0.3, 0.3], "power": 10.0}]
 
 
-@pytest.mark.parametrize("change", [_metal_walls, _glass_walls, _moving_box, _area_light])
+def _metallic_map(data, folder: Path):
+    data["materials"][0]["metallic_texture"] = write_texture(folder / "metal.exr",
+                                                             np.full((4, 4, 1), 0.7))
+
+
+def _alpha_mask(data, folder: Path):
+    rgba = np.tile([0.5, 0.5, 0.5, 1.0], (4, 4, 1))
+    rgba[:2, :, 3] = 0.0
+    data["materials"][0]["base_color_texture"] = write_texture(folder / "mask.exr", rgba)
+    data["materials"][0]["alpha_mode"] = "mask"
+
+
+@pytest.mark.parametrize("change", [_metal_walls, _glass_walls, _moving_box, _area_light,
+                                    _metallic_map, _alpha_mask])
 def test_scenes_that_need_more_take_the_wavefront_integrator(tmp_path, change):
     data = cornell()
-    change(data)
+    if change in (_metallic_map, _alpha_mask):
+        change(data, tmp_path)
+    else:
+        change(data)
     fr, _ = renderer(data, tmp_path)
     assert not fr.whole_paths
 

@@ -266,8 +266,8 @@ class FrameRenderer:
         self.kernel = prep.kernel._replace(shift=self.doppler, beam=self.searchlight)
         # the denoising albedo/normal AOVs: traced only when asked for
         self.features = "albedo" in self.aovs or "normal" in self.aovs
-        # a static scene of Lambert surfaces (no textures, no area-light quads): whole paths
-        # in one kernel call (whole_paths.py), else the wavefront integrator
+        # a static scene of Lambert surfaces (no alpha masks, no area-light quads): whole
+        # paths in one kernel call (whole_paths.py), else the wavefront integrator
         self.whole_paths = whole_paths.applies(self.kernel, prep.tracer, self.features)
         self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
 
@@ -412,7 +412,8 @@ class FrameRenderer:
             L, t_hit, seg = whole_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
                                               o_local, d_lab, lamu, nlanes,
                                               sky_seen=not s.transparent,
-                                              buffers=keep.setdefault("whole", {}))
+                                              buffers=keep.setdefault("whole", {}),
+                                              spread=spread)
         else:
             L, t_hit, seg, feats = trace(self.kernel, prep.tracer, s.max_depth, keys,
                                          o_local, d_lab, lamu, nlanes,

@@ -4,13 +4,15 @@
 The wavefront integrator (:func:`.integrator.trace`) carries every path's state in
 arrays from bounce to bounce, returns to Python between bounces, and runs one general
 kernel (:func:`.integrator.shade`: the principled material's lobes, textures, moving
-bodies, area-light quads, the denoising features). A static scene whose materials are
-all pure Lambert (diffuse weight 1, no metal or glass lobe), with no textures and no
-area-light quads (:func:`applies`), needs none of that: :func:`lambert_paths` traces
-each path to its end in one loop, Embree's ``rtcIntersect1``/``rtcOccluded1`` called
-from the kernel and the path's state in registers. Its surfaces may be flat or smooth
-(interpolated vertex normals), its lights emissive triangles, point, spot and sun lights,
-a constant sky or an environment map.
+bodies, alpha masks, area-light quads, the denoising features). A static scene whose
+materials are all pure Lambert (diffuse weight 1, no metal or glass lobe, no metallic
+map), with no alpha-masked material and no area-light quads (:func:`applies`), needs
+none of that: :func:`lambert_paths` traces each path to its end in one loop, Embree's
+``rtcIntersect1``/``rtcOccluded1`` called from the kernel and the path's state in
+registers. Its surfaces may be flat or smooth (interpolated vertex normals) and carry
+base-colour, roughness, normal and emission textures (looked up with the wavefront's ray
+cones); its lights may be emissive triangles, point, spot and sun lights, a constant sky
+or an environment map.
 
 The estimator is the wavefront integrator's, sample for sample, in the lab frame
 (accelerator coordinates; the camera stage has already aberrated the rays and shifted
@@ -18,6 +20,9 @@ the lanes). At a hit, n is the shading normal (the interpolated vertex normal on
 ray's side, :func:`.integrator.shading_normal`; else g), g the geometric normal turned
 towards the ray:
 
+- the textures as :func:`.integrator.shade` reads them: the base colour's texel
+  spectrum for ρ(λ), a normal map's normal for n, an emission texel (MIS weight 1), the
+  roughness for the cone's spread after the bounce;
 - the emission of a front face (or any face of a two-sided emitter) times the
   throughput, with the power heuristic against next-event estimation,
   w = p_bsdf² / (p_bsdf² + p_light²), p_light = p_sel t² / (A |cos θ_y|), except for the
@@ -86,6 +91,21 @@ from .sampling import (
     sobol2,
     to_world,
 )
+from .textures import (
+    BASE,
+    EMISSION,
+    METALLIC,
+    NORMAL,
+    ROUGHNESS,
+    bounce_spread,
+    channel,
+    hit_lod,
+    normal_mapped,
+    slot_texel,
+    texel_emission,
+    texel_reflectance,
+    triangle_uv,
+)
 
 _INV_PI = 1.0 / math.pi
 #: a log of no rays (``lambert_paths``' ``log`` when nothing is recorded)
@@ -96,25 +116,29 @@ NO_LOG = (np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32),
 
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     """Whether :func:`lambert_paths` can trace the scene ``sc`` (module docstring): a
-    static BVH (``accel`` an :class:`.accel.Accel`), pure Lambert materials, no textures
-    and no area-light quads, and no denoising features asked for."""
+    static BVH (``accel`` an :class:`.accel.Accel`), pure Lambert materials (no metallic
+    texture either), no alpha-masked material and no area-light quads, and no denoising
+    features asked for."""
     w = np.asarray(sc.mat_w)
-    return (isinstance(accel, Accel) and not features and not sc.tex.enabled
+    return (isinstance(accel, Accel) and not features and not sc.tex.cutouts
+            and not bool(np.any(np.asarray(sc.tex.mat_tex)[:, METALLIC] >= 0))
             and len(sc.area_tris) == 0 and len(w) > 0
             and bool(np.all(w[:, 0] == 1.0) and np.all(w[:, 1:] == 0.0)))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
-def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit, emit_row,
-                  one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot, l_cdf,
-                  tri_pmf, sky_pmf, sky_row, env_on, env_tex, env_marg, env_cond, env_pmf,
-                  env_rot, env_row, env_nm, eps_base, keys, o, d, lamu, nlanes, max_depth,
-                  sky_seen, L, first_t, record, log):  # pragma: no cover - compiled
+def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
+                  emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
+                  l_cdf, tri_pmf, sky_pmf, sky_row, env_on, env_tex, env_marg, env_cond, env_pmf,
+                  env_rot, env_row, env_nm, eps_base, tex, keys, o, d, lamu, spread, nlanes,
+                  max_depth, sky_seen, L, first_t, record, log):  # pragma: no cover - compiled
     """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
     ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
     its end: its lab radiance per lane into ``L[i]`` (lanes ≥ nlanes 0), the camera ray's
     hit distance into ``first_t[i]`` (1e30: none). ``sky_seen`` False (a transparent
-    film) hides the sky or map from camera rays. The scene arguments are those of
+    film) hides the sky or map from camera rays. With textures (``tex``:
+    :class:`.textures.TextureTable`), ``spread[i]`` is the camera ray's lab spread angle,
+    the start of its ray cone (:func:`.textures.lab_spread`). The scene arguments are those of
     :func:`scene_args`, in its order (``handle``: the static BVH's Embree scene; the
     others :class:`.integrator.KernelScene`'s fields).
 
@@ -124,6 +148,12 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit,
     ``max_depth`` rays of each kind per path. Returns (nearest-hit rays, shadow rays)."""
     f, w, addr = rayhit_buffer()
     rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
+    # the texture table's arrays as locals (read from the tuple in the loop, each access
+    # would count a reference)
+    (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
+     t_mat_flag, t_nscale, t_estr, _, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65, t_rgb, t_on,
+     _, _) = tex
+    alb = np.zeros(3, np.float64)  # a base-colour texel (linear Rec.709)
     top = emit.shape[1] - 1
     rgb = nlanes == 3
     li = np.zeros(4, np.int64)
@@ -150,6 +180,9 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit,
         dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
         first_t[i] = MISS_DISTANCE
         prev_pdf = 0.0
+        cone0, cone1 = 0.0, 0.0  # the ray cone: width at the origin, spread angle
+        if t_on:
+            cone1 = np.float64(spread[i])
         if record:
             bounces[i] = 0
         for depth in range(max_depth):
@@ -172,6 +205,42 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit,
             if has_vn:
                 n = shading_normal(vertex_normal(vn, tri, b1, b2), g, dx, dy, dz)
             m = tri_mat[tri]
+            # image textures (:func:`.integrator.shade`'s block, for Lambert materials):
+            # the base colour, the roughness (the cone's spread), the normal, the emission
+            a = mat_alpha[m]
+            tex_base = False
+            cone_w = cone0 + cone1 * t
+            if t_mat_flag[m] != 0:
+                uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
+                lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
+                if t_mat_tex[m, BASE] >= 0:
+                    tr_, tg_, tb_, _ = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                                  t_mat_factor, t_mat_lod, m, np.int64(BASE),
+                                                  uv[0], uv[1], lod)
+                    tex_base = True
+                    alb[0] = min(max(tr_, 0.0), 1.0)
+                    alb[1] = min(max(tg_, 0.0), 1.0)
+                    alb[2] = min(max(tb_, 0.0), 1.0)
+                if t_mat_tex[m, ROUGHNESS] >= 0:
+                    r_ = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                            t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS),
+                                            uv[0], uv[1], lod), t_mat_ch[m, ROUGHNESS])
+                    r_ = min(max(r_, 0.0), 1.0)
+                    a = max(r_ * r_, 1e-4)
+                if t_mat_tex[m, NORMAL] >= 0:
+                    nt = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                                    t_mat_lod, m, np.int64(NORMAL), uv[0], uv[1], lod)
+                    n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
+                    if has_vn:
+                        n0 = vertex_normal(vn, tri, b1, b2)
+                    n = shading_normal(normal_mapped(nt, t_nscale[m], n0, e1, e2, tri, duv1,
+                                                     duv2, t_mat_uv, m), g, dx, dy, dz)
+                if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
+                    texture_emission(L, i, thr, li, lf, lamu, nlanes, t_rgb, t_estr[m], emit,
+                                     t_d65, t_cscale, t_cdata,
+                                     slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                                t_mat_factor, t_mat_lod, m, np.int64(EMISSION),
+                                                uv[0], uv[1], lod))
             er = emit_row[m]
             if er >= 0 and (front or one_sided[m] == 0):
                 wt = 1.0
@@ -182,8 +251,12 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit,
                     L[i, j] += thr[j] * wt * lerp(emit, er, li[j], lf[j])
             if depth + 1 >= max_depth:
                 break
-            for j in range(nlanes):
-                rho[j] = lerp(refl, m, li[j], lf[j])
+            if tex_base:  # the texel's spectrum at each lane (rgb: its channels)
+                texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamu, i, t_uvir[m, 0],
+                                  t_uvir[m, 1], nlanes, rho)
+            else:
+                for j in range(nlanes):
+                    rho[j] = lerp(refl, m, li[j], lf[j])
             eps = ray_offset_at(eps_base, p[0], p[1], p[2])
             # next-event estimation: a light by the CDF, its number reused on the light
             if l_cdf.shape[0] > 1:
@@ -233,7 +306,7 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit,
             tb, bb = onb(n[0], n[1], n[2])
             wx, wy, wz = to_world(lx, ly, lz, tb, bb, n[0], n[1], n[2])
             prev_pdf = lz * _INV_PI
-            if prev_pdf <= 0.0 or (has_vn and wx * g[0] + wy * g[1] + wz * g[2] <= 0.0):
+            if prev_pdf <= 0.0 or wx * g[0] + wy * g[1] + wz * g[2] <= 0.0:
                 break
             q = 0.0
             for j in range(nlanes):
@@ -244,10 +317,32 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit,
                     break
                 for j in range(nlanes):
                     thr[j] /= q
+            if t_on:  # the cone goes on from this hit, widened by the bounce
+                cone0 = cone_w
+                cone1 = bounce_spread(cone1, a, False)
             on = offset_point(p, g, eps, 1.0)
             ox, oy, oz = np.float32(on[0]), np.float32(on[1]), np.float32(on[2])
             dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
     return n_rays, n_sh
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def texture_emission(L, i, thr, li, lf, lamu, nlanes, rgb_mode, strength, emit, d65_row,
+                     cscale, cdata, texel):
+    """Add to ``L[i]`` the emission texel (r, g, b, a) times ``strength`` and the
+    throughput: an RGB emitter per texel, L = strength · s(λ) · D65_ext(λ)
+    (:func:`.textures.texel_emission`; the rgb mode: its channels), met by BSDF sampling
+    only (MIS weight 1), as in :func:`.integrator.shade`. Compiled apart without reference
+    counting."""
+    er_, eg_, eb_ = max(texel[0], 0.0), max(texel[1], 0.0), max(texel[2], 0.0)
+    if rgb_mode:
+        L[i, 0] += thr[0] * strength * er_
+        L[i, 1] += thr[1] * strength * eg_
+        L[i, 2] += thr[2] * strength * eb_
+        return
+    for j in range(nlanes):
+        L[i, j] += thr[j] * strength * texel_emission(er_, eg_, eb_, cscale, cdata, lamu, i,
+                                                      j) * lerp(emit, d65_row, li[j], lf[j])
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -297,26 +392,28 @@ _BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int3
 def scene_args(sc: KernelScene, accel: Accel) -> tuple:
     """The scene arguments of :func:`lambert_paths`, in its order."""
     return (accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
-            sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
+            sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
             sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
             sc.sky_pmf, sc.sky_row, sc.env_on, sc.env_tex, sc.env_marg, sc.env_cond,
-            sc.env_pmf, sc.env_rot, sc.env_row, sc.env_nm, sc.eps)
+            sc.env_pmf, sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex)
 
 
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
-          sky_seen: bool = True, buffers: dict | None = None
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          sky_seen: bool = True, buffers: dict | None = None,
+          spread: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`.integrator.trace` for a scene where :func:`applies`: (L (N, 4) lab radiance,
     the camera rays' hit distances (1e30: none), their moving segments (all -1)), the
     arrays kept in ``buffers`` until its next use (:func:`.integrator.wavefront_buffers`).
     ``o_local``/``d`` float32 (N, 3) camera rays in accelerator coordinates, ``lamu`` the
     lanes' table coordinates (N, 4); ``sky_seen`` False hides the sky or map from the
-    camera rays (a transparent film)."""
+    camera rays (a transparent film); ``spread``: the camera rays' lab spread angles ((N,)
+    or one for all), the ray cones' start for the textures' level of detail."""
     n = len(keys)
     b = wavefront_buffers(n, buffers, _BUFFERS)
     b["seg"][:] = -1
+    spread = np.ascontiguousarray(np.broadcast_to(np.asarray(spread, np.float32), (n,)))
     lambert_paths(*scene_args(sc, accel), keys, np.ascontiguousarray(o_local, np.float32),
                   np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-                  nlanes, max_depth, sky_seen, b["L"], b["first_t"], False, NO_LOG)
+                  spread, nlanes, max_depth, sky_seen, b["L"], b["first_t"], False, NO_LOG)
     return b["L"], b["first_t"], b["seg"]
