@@ -207,10 +207,12 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, 
             m = tri_mat[tri]
             # image textures (:func:`.integrator.shade`'s block, for Lambert materials):
             # the base colour, the roughness (the cone's spread), the normal, the emission
-            a = mat_alpha[m]
             tex_base = False
-            cone_w = cone0 + cone1 * t
-            if t_mat_flag[m] != 0:
+            a = cone_w = 0.0
+            if t_on:  # (a scene without textures skips the block and the cones)
+                a = np.float64(mat_alpha[m])
+                cone_w = cone0 + cone1 * t
+            if t_on and t_mat_flag[m] != 0:
                 uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
                 lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
                 if t_mat_tex[m, BASE] >= 0:
