@@ -129,12 +129,13 @@ from .textures import (
     NORMAL,
     ROUGHNESS,
     TextureTable,
+    base_texel,
     bounce_spread,
-    channel,
     hit_lod,
     holes,
     no_textures,
-    normal_mapped,
+    normal_texel,
+    scalar_texel,
     slot_texel,
     texel_emission,
     texel_reflectance,
@@ -784,36 +785,29 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
             lod = hit_lod(duv1, duv2, s_area[tri], cone_w, cos_g)
             if t_mat_tex[m, BASE] >= 0:
-                # (the slots as int64, not as literals: one compiled slot_texel for all)
-                tr_, tg_, tb_, _ = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                              t_mat_factor, t_mat_lod, m, np.int64(BASE), uv[0],
-                                              uv[1], lod)
+                base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                           t_mat_lod, m, uv[0], uv[1], lod, alb)
                 tex_base = True
-                alb[0] = min(max(tr_, 0.0), 1.0)
-                alb[1] = min(max(tg_, 0.0), 1.0)
-                alb[2] = min(max(tb_, 0.0), 1.0)
             if t_mat_tex[m, ROUGHNESS] >= 0:
-                r_ = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                        t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS),
-                                        uv[0], uv[1], lod), t_mat_ch[m, ROUGHNESS])
-                r_ = min(max(r_, 0.0), 1.0)
+                # (the slots as int64, not as literals: one compiled function for all)
+                r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
+                                  t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0], uv[1],
+                                  lod)
                 a = max(r_ * r_, 1e-4)
             if t_mat_tex[m, METALLIC] >= 0:
-                mt = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                        t_mat_factor, t_mat_lod, m, np.int64(METALLIC),
-                                        uv[0], uv[1], lod), t_mat_ch[m, METALLIC])
-                mt = min(max(mt, 0.0), 1.0)
+                mt = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
+                                  t_mat_factor, t_mat_lod, m, np.int64(METALLIC), uv[0], uv[1],
+                                  lod)
                 tt = t_trans[m]
                 wd, wm, wg = (1.0 - mt) * (1.0 - tt), mt, (1.0 - mt) * tt
             if t_mat_tex[m, NORMAL] >= 0:
-                nt = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                                t_mat_lod, m, np.int64(NORMAL), uv[0], uv[1], lod)
                 n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
                 if s_has_vn:
                     n0 = vertex_normal(s_vn, tri, b1, b2)
-                nmap = normal_mapped(nt, t_nscale[m], n0, s_e1, s_e2, tri, duv1, duv2,
-                                     t_mat_uv, m)
-                nrm = shading_normal(nmap, g, dx, dy, dz)
+                nrm = shading_normal(normal_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                                  t_mat_factor, t_mat_lod, m, uv[0], uv[1], lod,
+                                                  t_nscale[m], n0, s_e1, s_e2, tri, duv1, duv2),
+                                     g, dx, dy, dz)
             if t_mat_tex[m, EMISSION] >= 0 and (front or s_mat_one_sided[m] == 0):
                 # an RGB emitter per texel, L = scale s(λ) D65_ext(λ) (physics.md), met by
                 # BSDF sampling only (the material is no light of next-event estimation:

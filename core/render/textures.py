@@ -416,6 +416,38 @@ def spectral_modes_with_table(mode: str) -> bool:
     return mode in spectrum.MODES and mode != "rgb"
 
 
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def base_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out):
+    """Material m's base-colour texel at (u, v) (level of detail ``lod``), each channel
+    clamped to [0, 1], into ``out[:3]`` (linear Rec.709)."""
+    r, g, b, _ = slot_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
+                            np.int64(BASE), u, v, lod)
+    out[0] = min(max(r, 0.0), 1.0)
+    out[1] = min(max(g, 0.0), 1.0)
+    out[2] = min(max(b, 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def scalar_texel(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod, m, slot, u,
+                 v, lod):
+    """The channel a scalar slot (``ROUGHNESS``, ``METALLIC``) of material m reads at
+    (u, v), clamped to [0, 1]."""
+    t = slot_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot, u, v,
+                   lod)
+    return min(max(channel(t, mat_ch[m, slot]), 0.0), 1.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def normal_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, scale,
+                 n0, e1, e2, tri, duv1, duv2):
+    """The (unnormalised) normal of material m's normal map at (u, v) on triangle ``tri``
+    with interpolated or geometric front normal ``n0``: :func:`normal_mapped` of its
+    texel (``scale``: glTF normalTexture.scale)."""
+    t = slot_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
+                   np.int64(NORMAL), u, v, lod)
+    return normal_mapped(t, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def channel(t, c):
     """Component ``c`` (0..3) of the RGBA tuple ``t``."""

@@ -97,10 +97,11 @@ from .textures import (
     METALLIC,
     NORMAL,
     ROUGHNESS,
+    base_texel,
     bounce_spread,
-    channel,
     hit_lod,
-    normal_mapped,
+    normal_texel,
+    scalar_texel,
     slot_texel,
     texel_emission,
     texel_reflectance,
@@ -216,27 +217,22 @@ def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, 
                 uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
                 lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
                 if t_mat_tex[m, BASE] >= 0:
-                    tr_, tg_, tb_, _ = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                                  t_mat_factor, t_mat_lod, m, np.int64(BASE),
-                                                  uv[0], uv[1], lod)
+                    base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                               t_mat_lod, m, uv[0], uv[1], lod, alb)
                     tex_base = True
-                    alb[0] = min(max(tr_, 0.0), 1.0)
-                    alb[1] = min(max(tg_, 0.0), 1.0)
-                    alb[2] = min(max(tb_, 0.0), 1.0)
                 if t_mat_tex[m, ROUGHNESS] >= 0:
-                    r_ = channel(slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                            t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS),
-                                            uv[0], uv[1], lod), t_mat_ch[m, ROUGHNESS])
-                    r_ = min(max(r_, 0.0), 1.0)
+                    r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
+                                      t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0],
+                                      uv[1], lod)
                     a = max(r_ * r_, 1e-4)
                 if t_mat_tex[m, NORMAL] >= 0:
-                    nt = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                                    t_mat_lod, m, np.int64(NORMAL), uv[0], uv[1], lod)
                     n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
                     if has_vn:
                         n0 = vertex_normal(vn, tri, b1, b2)
-                    n = shading_normal(normal_mapped(nt, t_nscale[m], n0, e1, e2, tri, duv1,
-                                                     duv2, t_mat_uv, m), g, dx, dy, dz)
+                    n = shading_normal(normal_texel(t_atlas, t_desc, t_rows, t_mat_tex,
+                                                    t_mat_uv, t_mat_factor, t_mat_lod, m, uv[0],
+                                                    uv[1], lod, t_nscale[m], n0, e1, e2, tri,
+                                                    duv1, duv2), g, dx, dy, dz)
                 if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
                     texture_emission(L, i, thr, li, lf, lamu, nlanes, t_rgb, t_estr[m], emit,
                                      t_d65, t_cscale, t_cdata,
