@@ -361,7 +361,8 @@ def miss_radiance(L, i, thr, li, lf, lam4, base4, nlanes, rgb, depth, prev_pdf, 
     estimation, w = p_bsdf² / (p_bsdf² + p_light²) with p_light = p_sel / 4π (sky) or
     p_sel · pdf(ω) (map, :func:`.environment.env_texel_pdf`), except for the camera ray
     (depth 0: w = 1, the map looked up bilinearly, as :func:`.integrator.shade` does
-    after a delta bounce)."""
+    after a delta bounce). Compiled apart and without reference counting: inlined, its
+    branches made the kernel count references to its eight arrays at every miss."""
     if sky_row >= 0:
         wt = 1.0
         if depth > 0 and sky_pmf > 0.0:
