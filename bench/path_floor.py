@@ -133,13 +133,11 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
     log = (np.empty((n * depth, 3), np.float32), np.empty((n * depth, 3), np.float32),
            np.empty((n * depth, 3), np.float32), np.empty((n * depth, 3), np.float32),
            np.empty(n * depth, np.float32), np.zeros(n, np.int64))
-    args = whole_paths.scene_args(sc, prep.tracer)
     spread = np.zeros(n, np.float32)  # (untextured scenes: no ray cones)
 
     def run_whole(record: bool) -> tuple[int, int]:
-        return whole_paths.lambert_paths(*args, keys, o, d, lamu, spread, 4, depth, True, L,
-                                         first_t, record,
-                                         log if record else whole_paths.NO_LOG)
+        return whole_paths.lambert_paths(sc, prep.tracer, keys, o, d, lamu, spread, 4, depth,
+                                         True, L, first_t, log if record else None)
 
     buffers: dict = {}
 
@@ -157,9 +155,9 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
     far = np.full(1, MISS_DISTANCE, np.float32)
 
     def run_embree() -> None:
-        intersect_rays(args[0], rec_o[:n_rays], rec_d[:n_rays], far, hit_t, hit_p, hit_u,
+        intersect_rays(prep.tracer.handle, rec_o[:n_rays], rec_d[:n_rays], far, hit_t, hit_p, hit_u,
                        hit_v)
-        occluded_rays(args[0], sh_o[:n_sh], sh_d[:n_sh], sh_t[:n_sh], blocked)
+        occluded_rays(prep.tracer.handle, sh_o[:n_sh], sh_d[:n_sh], sh_t[:n_sh], blocked)
 
     whole_l = L.copy()
     wave_l = run_wavefront()[1].copy()

@@ -2,8 +2,9 @@
 
 ``python -m relray.core.warmup`` renders a tiny frame of :data:`WARMUP_JOB` (a static
 and a moving sphere, a point and an area light, every AOV, the default spectral model)
-and of the same scene without the moving sphere,
-which runs every numba kernel a frame uses, so their machine code lands in the kernel
+and of the same scene without the moving sphere, then a static Lambert scene plain, under
+an environment map, with an image texture and with both (:func:`warmup_jobs`), which
+runs every numba kernel a frame uses, so their machine code lands in the kernel
 cache (``relray.core.kernel_cache_dir``). A later process that renders loads the kernels
 from there in about a second instead of compiling them for tens of seconds. The Blender
 add-on starts this in a child process when it is enabled (``relblend.warmup``), so the
@@ -12,11 +13,17 @@ first F12 does not stall and Blender's interface never waits on a compiler.
 
 from __future__ import annotations
 
+import copy
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import OpenImageIO as oiio
+
+from .output.imageio import write_pixels
 from .render.frames import build_renderer
 from .scene.job import parse_job
 from .scene.motion import frame_events
@@ -58,25 +65,47 @@ LAMBERT_JOB: dict[str, Any] = {
 }
 
 
-def warmup_jobs() -> list[dict[str, Any]]:
-    """:data:`WARMUP_JOB`, the same without its moving sphere, and :data:`LAMBERT_JOB`:
-    the kernels are typed per argument (a scene without moving objects passes other
-    types), and the Lambert scene takes the whole-path kernel, so every kind is
-    compiled."""
+def _write_image(path: Path, pixels: np.ndarray) -> str:
+    """A float EXR of (h, w, c) ``pixels``; returns its file name."""
+    px = np.ascontiguousarray(pixels, np.float32)
+    write_pixels(path, path, px, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2],
+                                                oiio.FLOAT))
+    return path.name
+
+
+def lambert_variants(folder: Path) -> list[dict[str, Any]]:
+    """:data:`LAMBERT_JOB` under an environment map, with image textures, and with both:
+    the whole-path kernel is compiled apart for each kind (``whole_paths.kernel``). Their
+    8 × 4 map and 2 × 2 texture are written into ``folder``."""
+    sky = _write_image(folder / "sky.exr", np.full((4, 8, 3), 0.5))
+    checker = _write_image(folder / "checker.exr", np.indices((2, 2, 3)).sum(axis=0) % 2)
+    env = {**LAMBERT_JOB, "scene": {"environment": {"file": sky}}}
+    tex = copy.deepcopy(LAMBERT_JOB)
+    tex["materials"][0]["base_color_texture"] = checker
+    return [env, tex, {**tex, "scene": env["scene"]}]
+
+
+def warmup_jobs(folder: Path) -> list[dict[str, Any]]:
+    """:data:`WARMUP_JOB`, the same without its moving sphere, :data:`LAMBERT_JOB` and
+    :func:`lambert_variants` (their files in ``folder``): the kernels are typed per
+    argument (a scene without moving objects passes other types), and the Lambert scenes
+    take the whole-path kernel, compiled per kind, so every kind is compiled."""
     static = dict(WARMUP_JOB)
     static["objects"] = [o for o in WARMUP_JOB["objects"] if "velocity" not in o]
-    return [static, WARMUP_JOB, LAMBERT_JOB]
+    return [static, WARMUP_JOB, LAMBERT_JOB, *lambert_variants(folder)]
 
 
 def warm() -> float:
     """Render a frame of each of :func:`warmup_jobs` in memory; returns the seconds."""
     t0 = time.perf_counter()
-    for data in warmup_jobs():
-        job = parse_job(data, Path("warmup.toml"))
-        renderer = build_renderer(job)
-        frame, event = frame_events(job)[0]
-        film, _ = renderer.render(event, frame)
-        film.resolve(renderer.to_rgb)
+    with tempfile.TemporaryDirectory(prefix="relray-warmup-") as tmp:
+        folder = Path(tmp)
+        for data in warmup_jobs(folder):
+            job = parse_job(copy.deepcopy(data), folder / "warmup.toml")
+            renderer = build_renderer(job)
+            frame, event = frame_events(job)[0]
+            film, _ = renderer.render(event, frame)
+            film.resolve(renderer.to_rgb)
     return time.perf_counter() - t0
 
 

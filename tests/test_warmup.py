@@ -23,21 +23,31 @@ def kernel_types(job) -> numba.types.Type:
 
 
 @pytest.mark.parametrize("preset", ["cornell.toml", "moving/terrell.toml"])
-def test_a_preset_passes_the_kernels_the_types_the_warm_up_compiled(preset):
-    warm = {kernel_types(parse_job(d, Path("warmup.toml"))) for d in warmup.warmup_jobs()}
+def test_a_preset_passes_the_kernels_the_types_the_warm_up_compiled(preset, tmp_path):
+    warm = {kernel_types(parse_job(d, tmp_path / "warmup.toml"))
+            for d in warmup.warmup_jobs(tmp_path)}
     assert kernel_types(load_job(PRESETS / preset)) in warm
 
 
-def test_the_warm_up_renders_a_scene_that_takes_whole_paths():
-    """The Cornell box's integrator (render/whole_paths.py) is compiled by the warm-up too,
-    with the argument types the preset passes it."""
+def whole_path_kernel(job):
+    """The whole-path kernel a job's scene runs, as (map, textures, argument types), or
+    None where the scene takes the wavefront (render/whole_paths.py)."""
     from relray.core.render import whole_paths
 
-    def whole(job):
-        prep = prepare(build_scene(job), job.render.spectral)
-        if not whole_paths.applies(prep.kernel, prep.tracer, False):
-            return None
-        return tuple(numba.typeof(a) for a in whole_paths.scene_args(prep.kernel, prep.tracer))
+    prep = prepare(build_scene(job), job.render.spectral)
+    if not whole_paths.applies(prep.kernel, prep.tracer, False):
+        return None
+    return (prep.kernel.env_on, prep.kernel.tex.enabled,
+            tuple(numba.typeof(a) for a in whole_paths.scene_args(prep.kernel, prep.tracer)))
 
-    warm = {whole(parse_job(d, Path("warmup.toml"))) for d in warmup.warmup_jobs()} - {None}
-    assert warm and whole(load_job(PRESETS / "cornell.toml")) in warm
+
+def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
+    """The whole-path kernel is compiled apart for a map, textures, both and neither
+    (``whole_paths.kernel``): the warm-up renders each kind, with the argument types the
+    Cornell box (untextured) and the default fly-by (textured) pass."""
+    warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
+            for d in warmup.warmup_jobs(tmp_path)} - {None}
+    assert {(env, tex) for env, tex, _ in warm} == {(False, False), (True, False),
+                                                    (False, True), (True, True)}
+    for preset in ("cornell.toml", "flyby.toml"):
+        assert whole_path_kernel(load_job(PRESETS / preset)) in warm, preset

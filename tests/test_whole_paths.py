@@ -141,6 +141,17 @@ def _textures(data, folder: Path):
             o["material"] = "glow"
 
 
+def _checker(data, folder: Path):
+    """A base-colour checker and a tilted normal map on every material (the map-lit scene:
+    the kernel compiled for a map and textures together)."""
+    ij = np.indices((8, 8)).sum(axis=0) % 2
+    checker = write_texture(folder / "checker.exr",
+                            np.where(ij[..., None] == 1, [0.8, 0.7, 0.2], [0.1, 0.3, 0.6]))
+    tilt = write_texture(folder / "tilt.exr", np.tile([0.75, 0.5, 0.93], (4, 4, 1)))
+    for m in data["materials"]:
+        m.update(base_color_texture=checker, normal_texture=tilt)
+
+
 def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     """A scene that takes whole paths: the Cornell box (plain, under a constant sky, or
     with delta lights added) or :func:`environment_scene` (plain or on a transparent
@@ -149,8 +160,8 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     data = environment_scene(tmp_path) if name == "environment" else cornell()
     data["render"].update(spectral=spectral, spp=8)
     data["motion"]["beta"] = [0.0, beta, 0.0]
-    if change == "textures":
-        _textures(data, tmp_path)
+    if change in ("textures", "checker"):
+        (_textures if change == "textures" else _checker)(data, tmp_path)
     elif change:
         {"sky": _sky, "delta_lights": _delta_lights, "transparent": _transparent}[change](data)
     return data
@@ -162,7 +173,8 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     ("cornell+delta_lights", "rgb", 0.0), ("environment", "cie1931", 0.0),
     ("environment", "cie1931", 0.6), ("environment", "rgb", 0.0),
     ("environment+transparent", "cie1931", 0.0), ("cornell+textures", "cie1931", 0.0),
-    ("cornell+textures", "cie1931", 0.6), ("cornell+textures", "rgb", 0.0)])
+    ("cornell+textures", "cie1931", 0.6), ("cornell+textures", "rgb", 0.0),
+    ("environment+checker", "cie1931", 0.6)])
 def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
         tmp_path, scene, spectral, beta):
     fr, ev = renderer(scene_data(tmp_path, scene, spectral, beta), tmp_path)

@@ -47,6 +47,7 @@ path by path; ``bench/path_floor.py`` measures the two against Embree's own cost
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -70,7 +71,6 @@ from .integrator import (
     column,
     face_forward,
     lerp,
-    lerp_at,
     offset_point,
     shading_normal,
     shadow_ray,
@@ -127,201 +127,207 @@ def applies(sc: KernelScene, accel: object, features: bool) -> bool:
             and bool(np.all(w[:, 0] == 1.0) and np.all(w[:, 1:] == 0.0)))
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
-def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
-                  emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
-                  l_cdf, tri_pmf, sky_pmf, sky_row, env_on, env_tex, env_marg, env_cond, env_pmf,
-                  env_rot, env_row, env_nm, eps_base, tex, keys, o, d, lamu, spread, nlanes,
-                  max_depth, sky_seen, L, first_t, record, log):  # pragma: no cover - compiled
-    """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
-    ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
-    its end: its lab radiance per lane into ``L[i]`` (lanes ≥ nlanes 0), the camera ray's
-    hit distance into ``first_t[i]`` (1e30: none). ``sky_seen`` False (a transparent
-    film) hides the sky or map from camera rays. With textures (``tex``:
-    :class:`.textures.TextureTable`), ``spread[i]`` is the camera ray's lab spread angle,
-    the start of its ray cone (:func:`.textures.lab_spread`). The scene arguments are those of
-    :func:`scene_args`, in its order (``handle``: the static BVH's Embree scene; the
-    others :class:`.integrator.KernelScene`'s fields).
+def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
+    """The whole-path kernel for one kind of scene (:func:`kernel`): ``with_env`` an
+    environment map, ``with_tex`` image textures, ``record`` the benchmarks' ray log. The
+    three are constants of the compiled code, so numba prunes the branches they close and
+    never compiles those branches' callees (the map's sampler and lookups, the texture
+    lookups, the log): the Cornell box's kernel compiles in a fraction of the full one's
+    time. numba's on-disk cache keys each variant by its closure's values."""
 
-    ``record`` (benchmarks): every nearest-hit and every shadow ray, and the number of
-    continuations of each path, into ``log`` = (origins, directions, shadow origins,
-    shadow directions, shadow lengths, continuations per path), with room for
-    ``max_depth`` rays of each kind per path. Returns (nearest-hit rays, shadow rays)."""
-    f, w, addr = rayhit_buffer()
-    rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
-    # the texture table's arrays as locals (read from the tuple in the loop, each access
-    # would count a reference)
-    (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
-     t_mat_flag, t_nscale, t_estr, _, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65, t_rgb, t_on,
-     _, _) = tex
-    alb = np.zeros(3, np.float64)  # a base-colour texel (linear Rec.709)
-    top = emit.shape[1] - 1
-    rgb = nlanes == 3
-    li = np.zeros(4, np.int64)
-    lf = np.zeros(4, np.float64)
-    thr = np.zeros(4, np.float64)
-    rho = np.zeros(4, np.float64)
-    n_rays = 0
-    n_sh = 0
-    for i in range(keys.shape[0]):
-        key = keys[i]
-        for j in range(4):
-            L[i, j] = 0.0
-        for j in range(nlanes):
-            li[j], lf[j] = column(lamu[i, j], top)
-            thr[j] = 1.0
-        # the map's lookups: the lanes' λ and E(λ), fixed along a path in a static scene
-        lam4 = base4 = (0.0, 0.0, 0.0, 0.0)
-        if env_on:
-            lu4 = (np.float64(lamu[i, 0]), np.float64(lamu[i, 1]), np.float64(lamu[i, 2]),
-                   np.float64(lamu[i, 3]))
-            lam4 = lane_lambdas(lu4, rgb)
-            base4 = env_base(emit, env_row, lu4, top, nlanes)
-        ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
-        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
-        first_t[i] = MISS_DISTANCE
-        prev_pdf = 0.0
-        cone0, cone1 = 0.0, 0.0  # the ray cone: width at the origin, spread angle
-        if t_on:
-            cone1 = np.float64(spread[i])
-        if record:
-            bounces[i] = 0
-        for depth in range(max_depth):
-            if record:
-                rec_o[n_rays, 0], rec_o[n_rays, 1], rec_o[n_rays, 2] = ox, oy, oz
-                rec_d[n_rays, 0], rec_d[n_rays, 1], rec_d[n_rays, 2] = dx, dy, dz
-            n_rays += 1
-            t, tri, b1, b2 = intersect1(handle, f, w, addr, ox, oy, oz, dx, dy, dz, MISS_DISTANCE)
-            if tri < 0:  # the sky or the map (none: black)
-                if depth > 0 or sky_seen:
-                    miss_radiance(L, i, thr, li, lf, lam4, base4, nlanes, rgb, depth,
-                                  prev_pdf, emit, sky_pmf, sky_row, env_on, env_tex, env_pmf,
-                                  env_rot, env_nm, dx, dy, dz)
-                break
-            if depth == 0:
-                first_t[i] = t
-            p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
-            g, front, cos_g = face_forward(g, np.float64(dx), np.float64(dy), np.float64(dz))
-            n = g  # the shading normal (interpolated vertex normals), g the geometric one
-            if has_vn:
-                n = shading_normal(vertex_normal(vn, tri, b1, b2), g, dx, dy, dz)
-            m = tri_mat[tri]
-            # image textures (:func:`.integrator.shade`'s block, for Lambert materials):
-            # the base colour, the roughness (the cone's spread), the normal, the emission
-            tex_base = False
-            a = cone_w = 0.0
-            if t_on:  # (a scene without textures skips the block and the cones)
-                a = np.float64(mat_alpha[m])
-                cone_w = cone0 + cone1 * t
-            if t_on and t_mat_flag[m] != 0:
-                uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
-                lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
-                if t_mat_tex[m, BASE] >= 0:
-                    base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                               t_mat_lod, m, uv[0], uv[1], lod, alb)
-                    tex_base = True
-                if t_mat_tex[m, ROUGHNESS] >= 0:
-                    r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
-                                      t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0],
-                                      uv[1], lod)
-                    a = max(r_ * r_, 1e-4)
-                if t_mat_tex[m, NORMAL] >= 0:
-                    n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
-                    if has_vn:
-                        n0 = vertex_normal(vn, tri, b1, b2)
-                    n = shading_normal(normal_texel(t_atlas, t_desc, t_rows, t_mat_tex,
-                                                    t_mat_uv, t_mat_factor, t_mat_lod, m, uv[0],
-                                                    uv[1], lod, t_nscale[m], n0, e1, e2, tri,
-                                                    duv1, duv2), g, dx, dy, dz)
-                if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
-                    texture_emission(L, i, thr, li, lf, lamu, nlanes, t_rgb, t_estr[m], emit,
-                                     t_d65, t_cscale, t_cdata,
-                                     slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                                t_mat_factor, t_mat_lod, m, np.int64(EMISSION),
-                                                uv[0], uv[1], lod))
-            er = emit_row[m]
-            if er >= 0 and (front or one_sided[m] == 0):
-                wt = 1.0
-                if depth > 0 and tri_pmf[tri] > 0.0:
-                    wt = power_heuristic(prev_pdf, lightmod.triangle_light_pdf(
-                        tri_pmf[tri], area[tri], t, cos_g))
-                for j in range(nlanes):
-                    L[i, j] += thr[j] * wt * lerp(emit, er, li[j], lf[j])
-            if depth + 1 >= max_depth:
-                break
-            if tex_base:  # the texel's spectrum at each lane (rgb: its channels)
-                texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamu, i, t_uvir[m, 0],
-                                  t_uvir[m, 1], nlanes, rho)
-            else:
-                for j in range(nlanes):
-                    rho[j] = lerp(refl, m, li[j], lf[j])
-            eps = ray_offset_at(eps_base, p[0], p[1], p[2])
-            # next-event estimation: a light by the CDF, its number reused on the light
-            if l_cdf.shape[0] > 1:
-                u_a, u2 = sobol2(key, bounce_dim(depth, DIM_LIGHT))
-                k, p_sel, lo = lightmod.select(l_cdf, u_a)
-                u1 = rescale_uniform(u_a, lo, p_sel)
-                is_env = l_kind[k] == lightmod.ENV
-                texel = (0, 0)
-                if is_env:
-                    (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
-                        env_marg, env_cond, env_pmf, env_rot, p_sel, u1, u2)
-                else:
-                    wi, p_l, scale, delta, finite, target, ok = lightmod.sample_light(
-                        lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot,
-                                              v0, e1, e2, ng, area, tri_mat, one_sided),
-                        p_sel, u1, u2, p[0], p[1], p[2], eps)
-                cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
-                if ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0 \
-                        and wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] > 0.0:
-                    c = (1.0 if delta else power_heuristic(p_l, cos_i * _INV_PI)) * cos_i \
-                        * scale / p_l * _INV_PI
-                    so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
-                    fo = (np.float32(so[0]), np.float32(so[1]), np.float32(so[2]))
-                    fd = (np.float32(sd[0]), np.float32(sd[1]), np.float32(sd[2]))
-                    if record:
-                        sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = fo
-                        sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = fd
-                        sh_t[n_sh] = st
-                    n_sh += 1
-                    if not occluded1(handle, f, w, addr, fo[0], fo[1], fo[2], fd[0], fd[1],
-                                     fd[2], np.float32(st)):
-                        if is_env:
-                            v4 = env_texel_at(env_tex, texel[0], texel[1], rgb, env_nm, lam4,
-                                              base4)
-                            for j in range(nlanes):
-                                L[i, j] += thr[j] * rho[j] * c * v4[j]
-                        else:
-                            row = l_row[k]
-                            for j in range(nlanes):
-                                L[i, j] += thr[j] * rho[j] * c * lerp(emit, row, li[j], lf[j])
-            # the continuation: cosine-weighted about the shading normal (refused below
-            # the geometric one), weight ρ
-            u1, u2 = sobol2(key, bounce_dim(depth, DIM_BSDF))
-            if record:
-                bounces[i] += 1
-            lx, ly, lz = cosine_hemisphere(u1, u2)
-            tb, bb = onb(n[0], n[1], n[2])
-            wx, wy, wz = to_world(lx, ly, lz, tb, bb, n[0], n[1], n[2])
-            prev_pdf = lz * _INV_PI
-            if prev_pdf <= 0.0 or wx * g[0] + wy * g[1] + wz * g[2] <= 0.0:
-                break
-            q = 0.0
+    @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
+    def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl,
+                      emit, emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale,
+                      l_spot, l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond,
+                      env_pmf, env_rot, env_row, env_nm, eps_base, tex, keys, o, d, lamu,
+                      spread, nlanes, max_depth, sky_seen, L, first_t,
+                      log):  # pragma: no cover - compiled
+        """:func:`lambert_paths`' kernel; the scene arguments those of :func:`scene_args`,
+        in its order, then :func:`lambert_paths`' own (``log``: :data:`NO_LOG` unless
+        ``record``)."""
+        f, w, addr = rayhit_buffer()
+        rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
+        # the texture table's arrays as locals (read from the tuple in the loop, each access
+        # would count a reference)
+        (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
+         t_mat_flag, t_nscale, t_estr, _, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65, t_rgb, _,
+         _, _) = tex
+        alb = np.zeros(3, np.float64)  # a base-colour texel (linear Rec.709)
+        top = emit.shape[1] - 1
+        rgb = nlanes == 3
+        li = np.zeros(4, np.int64)
+        lf = np.zeros(4, np.float64)
+        thr = np.zeros(4, np.float64)
+        rho = np.zeros(4, np.float64)
+        n_rays = 0
+        n_sh = 0
+        for i in range(keys.shape[0]):
+            key = keys[i]
+            for j in range(4):
+                L[i, j] = 0.0
             for j in range(nlanes):
-                thr[j] *= rho[j]
-                q = max(q, thr[j])
-            if depth + 1 >= RR_DEPTH and q < 1.0:
-                if rand(key, bounce_dim(depth, DIM_ROULETTE)) >= q:
+                li[j], lf[j] = column(lamu[i, j], top)
+                thr[j] = 1.0
+            # the map's lookups: the lanes' λ and E(λ), fixed along a path in a static scene
+            lam4 = base4 = (0.0, 0.0, 0.0, 0.0)
+            if with_env:
+                lam4 = lane_lambdas((np.float64(lamu[i, 0]), np.float64(lamu[i, 1]),
+                                     np.float64(lamu[i, 2]), np.float64(lamu[i, 3])), rgb)
+                base4 = env_base(emit, env_row, li, lf, nlanes)
+            ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
+            dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+            first_t[i] = MISS_DISTANCE
+            prev_pdf = 0.0
+            cone0, cone1 = 0.0, 0.0  # the ray cone: width at the origin, spread angle
+            if with_tex:
+                cone1 = np.float64(spread[i])
+            if record:
+                bounces[i] = 0
+            for depth in range(max_depth):
+                if record:
+                    rec_o[n_rays, 0], rec_o[n_rays, 1], rec_o[n_rays, 2] = ox, oy, oz
+                    rec_d[n_rays, 0], rec_d[n_rays, 1], rec_d[n_rays, 2] = dx, dy, dz
+                n_rays += 1
+                t, tri, b1, b2 = intersect1(handle, f, w, addr, ox, oy, oz, dx, dy, dz,
+                                            MISS_DISTANCE)
+                if tri < 0:  # the sky or the map (none: black)
+                    if depth == 0 and not sky_seen:
+                        pass
+                    elif sky_row >= 0:
+                        sky_radiance(L, i, thr, li, lf, nlanes, depth, prev_pdf, emit, sky_pmf,
+                                     sky_row)
+                    elif with_env:
+                        env_radiance(L, i, thr, lam4, base4, nlanes, depth, prev_pdf, sky_pmf,
+                                     env_tex, env_pmf, env_rot, env_nm, dx, dy, dz)
                     break
+                if depth == 0:
+                    first_t[i] = t
+                p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
+                g, front, cos_g = face_forward(g, np.float64(dx), np.float64(dy), np.float64(dz))
+                n = g  # the shading normal (interpolated vertex normals), g the geometric one
+                if has_vn:
+                    n = shading_normal(vertex_normal(vn, tri, b1, b2), g, dx, dy, dz)
+                m = tri_mat[tri]
+                # image textures (:func:`.integrator.shade`'s block, for Lambert materials):
+                # the base colour, the roughness (the cone's spread), the normal, the emission
+                tex_base = False
+                a = cone_w = 0.0
+                if with_tex:  # (a scene without textures skips the block and the cones)
+                    a = np.float64(mat_alpha[m])
+                    cone_w = cone0 + cone1 * t
+                if with_tex and t_mat_flag[m] != 0:
+                    uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
+                    lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
+                    if t_mat_tex[m, BASE] >= 0:
+                        base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                                   t_mat_lod, m, uv[0], uv[1], lod, alb)
+                        tex_base = True
+                    if t_mat_tex[m, ROUGHNESS] >= 0:
+                        r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
+                                          t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0],
+                                          uv[1], lod)
+                        a = max(r_ * r_, 1e-4)
+                    if t_mat_tex[m, NORMAL] >= 0:
+                        n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
+                        if has_vn:
+                            n0 = vertex_normal(vn, tri, b1, b2)
+                        n = shading_normal(normal_texel(t_atlas, t_desc, t_rows, t_mat_tex,
+                                                        t_mat_uv, t_mat_factor, t_mat_lod, m, uv[0],
+                                                        uv[1], lod, t_nscale[m], n0, e1, e2, tri,
+                                                        duv1, duv2), g, dx, dy, dz)
+                    if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
+                        texture_emission(L, i, thr, li, lf, lamu, nlanes, t_rgb, t_estr[m], emit,
+                                         t_d65, t_cscale, t_cdata,
+                                         slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                                    t_mat_factor, t_mat_lod, m, np.int64(EMISSION),
+                                                    uv[0], uv[1], lod))
+                er = emit_row[m]
+                if er >= 0 and (front or one_sided[m] == 0):
+                    wt = 1.0
+                    if depth > 0 and tri_pmf[tri] > 0.0:
+                        wt = power_heuristic(prev_pdf, lightmod.triangle_light_pdf(
+                            tri_pmf[tri], area[tri], t, cos_g))
+                    for j in range(nlanes):
+                        L[i, j] += thr[j] * wt * lerp(emit, er, li[j], lf[j])
+                if depth + 1 >= max_depth:
+                    break
+                if tex_base:  # the texel's spectrum at each lane (rgb: its channels)
+                    texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamu, i, t_uvir[m, 0],
+                                      t_uvir[m, 1], nlanes, rho)
+                else:
+                    for j in range(nlanes):
+                        rho[j] = lerp(refl, m, li[j], lf[j])
+                eps = ray_offset_at(eps_base, p[0], p[1], p[2])
+                # next-event estimation: a light by the CDF, its number reused on the light
+                if l_cdf.shape[0] > 1:
+                    u_a, u2 = sobol2(key, bounce_dim(depth, DIM_LIGHT))
+                    k, p_sel, lo = lightmod.select(l_cdf, u_a)
+                    u1 = rescale_uniform(u_a, lo, p_sel)
+                    is_env = False
+                    texel = (0, 0)
+                    # (without a map, the branch and its callees are not compiled)
+                    if with_env and l_kind[k] == lightmod.ENV:
+                        (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
+                            env_marg, env_cond, env_pmf, env_rot, p_sel, u1, u2)
+                        is_env = True
+                    else:
+                        wi, p_l, scale, delta, finite, target, ok = lightmod.sample_light(
+                            lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot,
+                                                  v0, e1, e2, ng, area, tri_mat, one_sided),
+                            p_sel, u1, u2, p[0], p[1], p[2], eps)
+                    cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+                    if ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0 \
+                            and wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] > 0.0:
+                        c = (1.0 if delta else power_heuristic(p_l, cos_i * _INV_PI)) * cos_i \
+                            * scale / p_l * _INV_PI
+                        so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
+                        fo = (np.float32(so[0]), np.float32(so[1]), np.float32(so[2]))
+                        fd = (np.float32(sd[0]), np.float32(sd[1]), np.float32(sd[2]))
+                        if record:
+                            sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = fo
+                            sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = fd
+                            sh_t[n_sh] = st
+                        n_sh += 1
+                        if not occluded1(handle, f, w, addr, fo[0], fo[1], fo[2], fd[0], fd[1],
+                                         fd[2], np.float32(st)):
+                            if with_env and is_env:
+                                v4 = env_texel_at(env_tex, texel[0], texel[1], rgb, env_nm, lam4,
+                                                  base4)
+                                for j in range(nlanes):
+                                    L[i, j] += thr[j] * rho[j] * c * v4[j]
+                            else:
+                                row = l_row[k]
+                                for j in range(nlanes):
+                                    L[i, j] += thr[j] * rho[j] * c * lerp(emit, row, li[j], lf[j])
+                # the continuation: cosine-weighted about the shading normal (refused below
+                # the geometric one), weight ρ
+                u1, u2 = sobol2(key, bounce_dim(depth, DIM_BSDF))
+                if record:
+                    bounces[i] += 1
+                lx, ly, lz = cosine_hemisphere(u1, u2)
+                tb, bb = onb(n[0], n[1], n[2])
+                wx, wy, wz = to_world(lx, ly, lz, tb, bb, n[0], n[1], n[2])
+                prev_pdf = lz * _INV_PI
+                if prev_pdf <= 0.0 or wx * g[0] + wy * g[1] + wz * g[2] <= 0.0:
+                    break
+                q = 0.0
                 for j in range(nlanes):
-                    thr[j] /= q
-            if t_on:  # the cone goes on from this hit, widened by the bounce
-                cone0 = cone_w
-                cone1 = bounce_spread(cone1, a, False)
-            on = offset_point(p, g, eps, 1.0)
-            ox, oy, oz = np.float32(on[0]), np.float32(on[1]), np.float32(on[2])
-            dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
-    return n_rays, n_sh
+                    thr[j] *= rho[j]
+                    q = max(q, thr[j])
+                if depth + 1 >= RR_DEPTH and q < 1.0:
+                    if rand(key, bounce_dim(depth, DIM_ROULETTE)) >= q:
+                        break
+                    for j in range(nlanes):
+                        thr[j] /= q
+                if with_tex:  # the cone goes on from this hit, widened by the bounce
+                    cone0 = cone_w
+                    cone1 = bounce_spread(cone1, a, False)
+                on = offset_point(p, g, eps, 1.0)
+                ox, oy, oz = np.float32(on[0]), np.float32(on[1]), np.float32(on[2])
+                dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
+        return n_rays, n_sh
+
+    return lambert_paths
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
@@ -344,57 +350,97 @@ def texture_emission(L, i, thr, li, lf, lamu, nlanes, rgb_mode, strength, emit, 
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def env_base(emit, env_row, lu4, top, nlanes):
-    """E(λ) of the map's emission row at the lanes' table coordinates ``lu4`` (the
-    fourth 0 in the rgb mode): :func:`.environment.env_lanes`' ``base``."""
-    return (lerp_at(emit, env_row, lu4[0], top), lerp_at(emit, env_row, lu4[1], top),
-            lerp_at(emit, env_row, lu4[2], top),
-            lerp_at(emit, env_row, lu4[3], top) if nlanes == 4 else 0.0)
+def env_base(emit, env_row, li, lf, nlanes):
+    """E(λ) of the map's emission row at the path's lanes (table columns ``li``, ``lf``;
+    the fourth 0 in the rgb mode): :func:`.environment.env_lanes`' ``base``."""
+    return (lerp(emit, env_row, li[0], lf[0]), lerp(emit, env_row, li[1], lf[1]),
+            lerp(emit, env_row, li[2], lf[2]),
+            lerp(emit, env_row, li[3], lf[3]) if nlanes == 4 else 0.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def miss_radiance(L, i, thr, li, lf, lam4, base4, nlanes, rgb, depth, prev_pdf, emit, sky_pmf,
-                  sky_row, env_on, env_tex, env_pmf, env_rot, env_nm, dx, dy, dz):
-    """Add to ``L[i]`` what a ray that escaped in the lab direction (dx, dy, dz) sees,
-    times the throughput: the constant sky (row ``sky_row`` ≥ 0) or the map (``env_on``;
-    the lanes' λ ``lam4`` and the map's E(λ) ``base4``), MIS-weighted against next-event
-    estimation, w = p_bsdf² / (p_bsdf² + p_light²) with p_light = p_sel / 4π (sky) or
-    p_sel · pdf(ω) (map, :func:`.environment.env_texel_pdf`), except for the camera ray
-    (depth 0: w = 1, the map looked up bilinearly, as :func:`.integrator.shade` does
-    after a delta bounce). Compiled apart and without reference counting: inlined, its
-    branches made the kernel count references to its eight arrays at every miss."""
-    if sky_row >= 0:
-        wt = 1.0
-        if depth > 0 and sky_pmf > 0.0:
-            wt = power_heuristic(prev_pdf, lightmod.sky_light_pdf(sky_pmf))
+def sky_radiance(L, i, thr, li, lf, nlanes, depth, prev_pdf, emit, sky_pmf, sky_row):
+    """Add to ``L[i]`` the constant sky (emission row ``sky_row``) seen by a ray that
+    escaped, times the throughput, MIS-weighted against next-event estimation,
+    w = p_bsdf² / (p_bsdf² + p_light²) with p_light = p_sel / 4π, except for the camera
+    ray (depth 0: w = 1). Compiled apart and without reference counting (inlined, its
+    branches made the kernel count references to its arrays at every miss)."""
+    wt = 1.0
+    if depth > 0 and sky_pmf > 0.0:
+        wt = power_heuristic(prev_pdf, lightmod.sky_light_pdf(sky_pmf))
+    for j in range(nlanes):
+        L[i, j] += thr[j] * wt * lerp(emit, sky_row, li[j], lf[j])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def env_radiance(L, i, thr, lam4, base4, nlanes, depth, prev_pdf, sky_pmf, env_tex, env_pmf,
+                 env_rot, env_nm, dx, dy, dz):
+    """Add to ``L[i]`` the environment map seen by a ray that escaped in the lab direction
+    (dx, dy, dz), times the throughput (the lanes' λ ``lam4`` and the map's E(λ)
+    ``base4``), MIS-weighted against next-event estimation with p_light = p_sel · pdf(ω)
+    (:func:`.environment.env_texel_pdf`; ``sky_pmf`` is the map's p_sel), except for the
+    camera ray (depth 0: w = 1, the map looked up bilinearly, as :func:`.integrator.shade`
+    does after a delta bounce). Compiled apart and without reference counting."""
+    rgb = nlanes == 3
+    if depth == 0:
+        v4 = env_bilinear_at(env_tex, env_bilinear(env_tex, env_rot, dx, dy, dz), rgb, env_nm,
+                             lam4, base4)
         for j in range(nlanes):
-            L[i, j] += thr[j] * wt * lerp(emit, sky_row, li[j], lf[j])
-    elif env_on:
-        if depth == 0:
-            v4 = env_bilinear_at(env_tex, env_bilinear(env_tex, env_rot, dx, dy, dz), rgb,
-                                 env_nm, lam4, base4)
-            for j in range(nlanes):
-                L[i, j] += thr[j] * v4[j]
-        else:
-            r_e, c_e, p_e = env_texel_pdf(env_pmf, env_rot, dx, dy, dz)
-            wt = 1.0
-            if sky_pmf > 0.0:
-                wt = power_heuristic(prev_pdf, sky_pmf * p_e)
-            v4 = env_texel_at(env_tex, r_e, c_e, rgb, env_nm, lam4, base4)
-            for j in range(nlanes):
-                L[i, j] += thr[j] * wt * v4[j]
+            L[i, j] += thr[j] * v4[j]
+        return
+    r_e, c_e, p_e = env_texel_pdf(env_pmf, env_rot, dx, dy, dz)
+    wt = 1.0
+    if sky_pmf > 0.0:
+        wt = power_heuristic(prev_pdf, sky_pmf * p_e)
+    v4 = env_texel_at(env_tex, r_e, c_e, rgb, env_nm, lam4, base4)
+    for j in range(nlanes):
+        L[i, j] += thr[j] * wt * v4[j]
 
 
 _BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int32))
+#: the ``spread`` of an untextured scene (its kernel never reads it)
+_NO_SPREAD = np.zeros(1, np.float32)
+#: the compiled variants, by (map, textures, record) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, bool, bool], Any] = {}
+
+
+def kernel(with_env: bool, with_tex: bool, record: bool = False) -> Any:
+    """The whole-path kernel for scenes with or without an environment map and image
+    textures, recording the rays or not (:func:`_compile`); made once per kind."""
+    key = (bool(with_env), bool(with_tex), bool(record))
+    if key not in _KERNELS:
+        _KERNELS[key] = _compile(*key)
+    return _KERNELS[key]
 
 
 def scene_args(sc: KernelScene, accel: Accel) -> tuple:
-    """The scene arguments of :func:`lambert_paths`, in its order."""
+    """The scene arguments of the compiled kernel (:func:`_compile`), in its order."""
     return (accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
             sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
             sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
-            sc.sky_pmf, sc.sky_row, sc.env_on, sc.env_tex, sc.env_marg, sc.env_cond,
-            sc.env_pmf, sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex)
+            sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond, sc.env_pmf,
+            sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex)
+
+
+def lambert_paths(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
+                  d: np.ndarray, lamu: np.ndarray, spread: np.ndarray, nlanes: int,
+                  max_depth: int, sky_seen: bool, L: np.ndarray, first_t: np.ndarray,
+                  log: tuple | None = None) -> tuple[int, int]:
+    """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
+    ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
+    its end through the scene ``sc`` (``accel``: its static BVH): its lab radiance per
+    lane into ``L[i]`` (lanes ≥ nlanes 0), the camera ray's hit distance into
+    ``first_t[i]`` (1e30: none). ``sky_seen`` False (a transparent film) hides the sky or
+    map from camera rays. With textures, ``spread[i]`` is the camera ray's lab spread
+    angle, the start of its ray cone (:func:`.textures.lab_spread`).
+
+    ``log`` (benchmarks): every nearest-hit and every shadow ray, and the number of
+    continuations of each path, into (origins, directions, shadow origins, shadow
+    directions, shadow lengths, continuations per path), with room for ``max_depth`` rays
+    of each kind per path. Returns (nearest-hit rays, shadow rays)."""
+    run = kernel(sc.env_on, sc.tex.enabled, log is not None)
+    return run(*scene_args(sc, accel), keys, o, d, lamu, spread, nlanes, max_depth, sky_seen,
+               L, first_t, NO_LOG if log is None else log)
 
 
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
@@ -411,8 +457,9 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
     n = len(keys)
     b = wavefront_buffers(n, buffers, _BUFFERS)
     b["seg"][:] = -1
-    spread = np.ascontiguousarray(np.broadcast_to(np.asarray(spread, np.float32), (n,)))
-    lambert_paths(*scene_args(sc, accel), keys, np.ascontiguousarray(o_local, np.float32),
+    spread = (np.ascontiguousarray(np.broadcast_to(np.asarray(spread, np.float32), (n,)))
+              if sc.tex.enabled else _NO_SPREAD)
+    lambert_paths(sc, accel, keys, np.ascontiguousarray(o_local, np.float32),
                   np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-                  spread, nlanes, max_depth, sky_seen, b["L"], b["first_t"], False, NO_LOG)
+                  spread, nlanes, max_depth, sky_seen, b["L"], b["first_t"])
     return b["L"], b["first_t"], b["seg"]
