@@ -100,14 +100,6 @@ def agreement_z(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.max(np.abs(a.mean(axis=0) - b.mean(axis=0)) / se))
 
 
-def paths_differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
-    """The share of paths (rows) whose radiance per lane differs by more than ``rel`` of
-    the larger of the two (plus a floor of ``rel`` times the mean radiance)."""
-    a, b = a.astype(np.float64), b.astype(np.float64)
-    tol = rel * (np.maximum(np.abs(a), np.abs(b)) + np.abs(a).mean())
-    return float(np.mean(np.any(np.abs(a - b) > tol, axis=1)))
-
-
 def rows(tmp: Path, size: int, spp: int, heavy_triangles: int,
          reps: int = 5) -> list[dict[str, Any]]:
     """:func:`measure` on each of :data:`FLOOR_SCENES` (``make bench``)."""
@@ -187,7 +179,7 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
             "bounces_per_path": float(bounces.mean()),
             "agreement_z": agreement_z(whole_l.astype(np.float64),
                                        wave_l.astype(np.float64)),
-            "paths_differing": paths_differing(whole_l, wave_l),
+            "paths_differing": whole_paths.paths_differing(whole_l, wave_l),
             "load": cm.load_average()[0]}
 
 

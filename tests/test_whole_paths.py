@@ -50,13 +50,6 @@ def camera_paths(fr, ev, spp: int):
     return cp.keys, cp.o, cp.d, np.ascontiguousarray(cp.lamu), cp.nlanes
 
 
-def differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
-    """Share of paths whose radiance differs in some lane by more than ``rel`` relative."""
-    a, b = a.astype(np.float64), b.astype(np.float64)
-    tol = rel * (np.maximum(np.abs(a), np.abs(b)) + np.abs(a).mean())
-    return float(np.mean(np.any(np.abs(a - b) > tol, axis=1)))
-
-
 def write_sky_map(path: Path) -> Path:
     """A 32 × 16 map: a blue upper half, a brown lower half, a bright 1-texel sun."""
     px = np.zeros((16, 32, 3), np.float32)  # row 0 = top (file order)
@@ -190,7 +183,7 @@ def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
     assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
     if nlanes == 3:
         assert np.all(L1[:, 3] == 0.0)
-    assert differing(L1[:, :nlanes], L2[:, :nlanes]) <= 0.005
+    assert whole_paths.paths_differing(L1[:, :nlanes], L2[:, :nlanes]) <= 0.005
     np.testing.assert_array_equal(t1, t2)
     assert np.all(seg1 == -1) and np.all(seg2 == -1)
     if not sky_seen:  # a camera ray that escapes sees nothing
@@ -260,3 +253,12 @@ def test_denoising_features_take_the_wavefront_integrator(tmp_path):
     data["output"]["aovs"] = ["albedo", "normal"]
     fr, _ = renderer(data, tmp_path)
     assert not fr.whole_paths
+
+
+def test_paths_differing_counts_the_rows_beyond_the_relative_tolerance():
+    a = np.ones((4, 3), np.float32)
+    b = a.copy()
+    b[1, 2] = 1.0 + 5e-5  # within 1e-4 of the larger value (plus the floor)
+    b[3, 0] = 1.01        # beyond it
+    assert whole_paths.paths_differing(a, b) == 0.25
+    assert whole_paths.paths_differing(a, a) == 0.0

@@ -443,6 +443,16 @@ def lambert_paths(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray
                L, first_t, NO_LOG if log is None else log)
 
 
+def paths_differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
+    """The share of paths (rows of two radiance arrays (N, lanes), e.g. this module's and
+    :func:`.integrator.trace`'s for the same paths) whose radiance in some lane differs
+    by more than ``rel`` of the larger of the two, plus a floor of ``rel`` times the mean
+    radiance: the two integrators agree path by path up to float rounding."""
+    a, b = a.astype(np.float64), b.astype(np.float64)
+    tol = rel * (np.maximum(np.abs(a), np.abs(b)) + np.abs(a).mean())
+    return float(np.mean(np.any(np.abs(a - b) > tol, axis=1)))
+
+
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
           sky_seen: bool = True, buffers: dict | None = None,
