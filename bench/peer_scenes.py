@@ -1,4 +1,5 @@
-"""The heavy, environment-lit and textured benchmark scenes against Mitsuba 3 and Cycles.
+"""The heavy, environment-lit, textured and moving benchmark scenes against Mitsuba 3 and
+Cycles.
 
     .venv/bin/python -m relray.bench.run --only peer_scenes
 
@@ -14,7 +15,14 @@ Issue 12 item 1 for the scenes after the Cornell box (:mod:`.mitsuba_peer` and
   texture's UV map (:func:`texture_uvs`; Mitsuba's v runs from the image's top,
   :data:`MITSUBA_FLIP_V`, checked by :func:`texture_v_check`); the roughness map
   (Lambert ignores it) and the flat normal map are left out, other textures refused
-  (:func:`exported_textures`).
+  (:func:`exported_textures`);
+- ``moving``: the Cornell box with its walls and blocks dealt into :data:`MOVING_GROUPS`
+  bodies, each moving at β = 10⁻⁴ in its own direction
+  (:func:`.velocity_groups.grouped_scene`, max_depth 8): relray traces it as it traces
+  any scene with moving bodies (the wavefront integrator, each body's rays in its rest
+  frame), and at that speed its picture is the box at rest to 10⁻⁴, so the peers render
+  the box at rest and the images must still agree. It measures what relray's machinery
+  for moving bodies costs against renderers that have none.
 
 Each scene is exported from relray's built :class:`~relray.core.scene.geometry.Scene`
 (its triangles, one mesh per material, the same winding):
@@ -55,7 +63,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from relray.bench import common as cm
-from relray.bench import environment, textures, throughput
+from relray.bench import environment, textures, throughput, velocity_groups
 from relray.bench import mitsuba_peer as mp
 from relray.bench.cycles_anchor import CyclesWorker, bpy_available, cycles_bounces, scene_npz
 from relray.core.render import frames as render
@@ -63,7 +71,9 @@ from relray.core.scene.description import Job
 from relray.core.scene.geometry import Scene, build_scene
 from relray.core.scene.job import parse_job
 
-SCENES = ("heavy", "environment", "textured")
+SCENES = ("heavy", "environment", "textured", "moving")
+#: the moving scene's bodies (:func:`.velocity_groups.grouped_scene`)
+MOVING_GROUPS = 4
 ENV_UPSAMPLE = 4
 # Mitsuba's bitmap reads texture coordinate v = 0 at the image's top row, relray (and
 # Blender) at its bottom row: the PLY's v is 1 - v (checked on converged images: the
@@ -94,9 +104,14 @@ def scene_bench(name: str, tmp: Path, width: int, height: int,
         folder.mkdir(exist_ok=True)
         environment.write_map(folder / "sky.exr")
         job = parse_job(environment.job_data(width, height, 1, 1, 0), folder / "job.toml")
+    elif name == "moving":
+        job = cm.make_job(cm.job_dict())
     else:
         raise ValueError(f"unknown peer scene {name!r}; choose from {SCENES}")
     job = replace(job, render=replace(job.render, width=width, height=height))
+    if name == "moving":
+        return cm.RelrayBench(job, scene=velocity_groups.grouped_scene(build_scene(job),
+                                                                       MOVING_GROUPS))
     return cm.RelrayBench(job)
 
 
@@ -343,6 +358,7 @@ class PeerScenesConfig:
     load_repeats: int = 3
     scenes: tuple[str, ...] = SCENES
     env_upsample: int = ENV_UPSAMPLE  # recorded: the factor of :func:`upsampled_map`
+    moving_groups: int = MOVING_GROUPS  # recorded: the moving scene's bodies
     orientation_size: int = 64  # the map orientation check (:func:`orientation_check`)
     orientation_spp: int = 256
     texture_check_size: int = 200  # the texture-coordinate check (:func:`texture_v_check`)

@@ -258,8 +258,9 @@ def write(out: Path, md: Path) -> Path:
         plots["mitsuba_converged"] = out / "mitsuba_converged.png"
     if (out / "peer_converged.png").exists() and d["peer_status"]:
         plots["peer_converged"] = out / "peer_converged.png"
-    if (out / "peer_converged_textured.png").exists() and d["peer_status"]:
-        plots["peer_converged_textured"] = out / "peer_converged_textured.png"
+    for name in ("peer_converged_textured", "peer_converged_moving"):
+        if (out / f"{name}.png").exists() and d["peer_status"]:
+            plots[name] = out / f"{name}.png"
     text = _markdown(meta, d, plots, out, md)
     md.parent.mkdir(parents=True, exist_ok=True)
     md.write_text(text)
@@ -784,7 +785,8 @@ def peer_goals(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
 
 
 def _section_peer_scenes(add, d, plots, md, meta) -> None:
-    add("### The heavy, environment-lit and textured scenes against Mitsuba 3 and Cycles\n")
+    add("### The heavy, environment-lit, textured and moving scenes against Mitsuba 3 and "
+        "Cycles\n")
     st = d["peer_status"]
     sec = meta.get("sections", {}).get("peer_scenes", {})
     cfg = sec.get("config", {})
@@ -805,7 +807,15 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
         "reflectances (sRGB-decoded, bilinear, repeat) and Cycles Image Textures "
         "('Linear') on relray's UVs through each texture's UV map (relray filters "
         "trilinearly from its mip pyramid; the blocks' roughness map, which Lambert "
-        "ignores, and their flat normal map are left out; any other texture is refused). "
+        "ignores, and their flat normal map are left out; any other texture is refused); "
+        f"**moving** = the Cornell box with its walls and blocks dealt into "
+        f"{cfg.get('moving_groups', 4)} bodies, each moving at β = 10⁻⁴ in its own "
+        "direction (`velocity_groups.grouped_scene`), max_depth 8: relray traces it as any "
+        "scene with moving bodies (the wavefront integrator, each body's rays in its rest "
+        "frame), and at that speed its picture is the box at rest to 10⁻⁴, so the peers "
+        "render the box at rest (they have no relativistic motion) and the converged "
+        "images must still agree: the ratios measure what relray's machinery for moving "
+        "bodies costs against renderers that have none. "
         "Settings as for the Cornell box above (NEE + MIS, `rr_depth` 4, box "
         "filter 1 px, the same camera, two-sided Lambert from the same RGB), with the "
         "meshes as binary PLY triangle soups (vertex normals where relray has shading "
@@ -850,6 +860,7 @@ def _section_peer_scenes(add, d, plots, md, meta) -> None:
             "seed than the ladder; the references' own noise is in the ΔE00):\n")
         _img(add, plots, "peer_converged", md, "heavy and environment scenes, converged")
         _img(add, plots, "peer_converged_textured", md, "textured scene, converged")
+        _img(add, plots, "peer_converged_moving", md, "moving scene, converged")
         add(table(cc, [("scene", "scene", ""), ("peer", "variant", ""), ("light", "light", ""),
                        *_converged_cols("peer", 3)]))
         add("")

@@ -328,8 +328,9 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
 
 def _run_peer_scenes(plan: Plan, out: Path, tmp: Path, use_cycles: bool, use_mitsuba: bool,
                      section, done, log) -> None:
-    """The ``peer_scenes`` section: the heavy and environment-lit scenes against Mitsuba 3
-    and Cycles (:mod:`.peer_scenes`), CSVs ``peer_*.csv`` and ``peer_converged.png``."""
+    """The ``peer_scenes`` section: the heavy, environment-lit, textured and moving scenes
+    against Mitsuba 3 and Cycles (:mod:`.peer_scenes`), CSVs ``peer_*.csv`` and the
+    ``peer_converged*.png`` plots."""
     section("peer_scenes")
     cfg = plan.peers
     if not use_mitsuba:
@@ -343,11 +344,11 @@ def _run_peer_scenes(plan: Plan, out: Path, tmp: Path, use_cycles: bool, use_mit
                           for s in cfg.scenes for v in mitsuba_peer.VARIANTS]
     for name in ("status", "converged", "raw", "medians", "equal_error", "orientation"):
         cm.write_csv(out / f"peer_{name}.csv", res[name])
-    report.plot_peer_converged({k: v for k, v in res["refs"].items()
-                                if not k.startswith("textured_")}, out / "peer_converged.png")
-    report.plot_peer_converged({k: v for k, v in res["refs"].items()
-                                if k.startswith("textured_")},
-                               out / "peer_converged_textured.png")
+    for scenes, png in ((("heavy", "environment"), "peer_converged.png"),
+                        (("textured",), "peer_converged_textured.png"),
+                        (("moving",), "peer_converged_moving.png")):
+        report.plot_peer_converged({k: v for k, v in res["refs"].items()
+                                    if k.split("_", 1)[0] in scenes}, out / png)
     done("peer_scenes", config=res["config"], simd=mitsuba_peer.simd())
 
 

@@ -21,6 +21,7 @@ from relray.bench import (
     run,
     skips,
     throughput,
+    wavelength_pdf,
 )
 
 
@@ -167,3 +168,19 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     env = skip_rows["no environment sampling without a map"]
     assert env["lights_B"] == env["lights_A"] + 1
     assert convergence.ConvergenceConfig().ref_spp == 16 * 256
+
+
+def test_the_wavelength_pdf_comparison_swaps_in_mitsubas_pdf_for_its_block_only():
+    """bench/wavelength_pdf.py: Mitsuba's sech² pdf on relray's bins (normalised, its
+    peak at 538 nm), used by renderers built inside the block, relray's own after it."""
+    from relray.core.physics import spectrum
+
+    own = spectrum.make_sampler("cie1931")
+    with wavelength_pdf.mitsuba_pdf():
+        sech = spectrum.make_sampler("cie1931")
+    widths = np.diff(sech.edges_nm)
+    assert np.sum(sech.pdf * widths) == pytest.approx(1.0)
+    mid = 0.5 * (sech.edges_nm[:-1] + sech.edges_nm[1:])
+    assert abs(mid[np.argmax(sech.pdf)] - 538.0) <= 1.0
+    assert not np.allclose(sech.pdf, own.pdf)
+    np.testing.assert_array_equal(spectrum.make_sampler("cie1931").pdf, own.pdf)
