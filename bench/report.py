@@ -1712,16 +1712,54 @@ def _section_recommendations(add, d) -> None:
             "6 alternated pairs, 128², 16 spp, 1 thread): environment-lit **0.84** "
             "(quartiles 0.81–0.93), textured **0.90** (0.84–0.94), Cornell 0.98–1.04 "
             "(unchanged within the noise). Equal-error CPU time at equal relative MSE, high / "
-            "low level, in the §2 run of 15:56 (load 1–2.2): the environment-lit scene against "
-            "`llvm_ad_spectral` **0.99 / 0.90** (1.05 / 0.92 with the wavefront, 12:26), "
-            "`scalar_spectral` 0.47 / **0.39** (0.52 / 0.42), Cycles **0.26 / 0.22**; the "
-            "textured scene **0.62 / 0.56** (0.84 / 0.63), **0.27 / 0.20** (0.39 / 0.26), "
-            "**0.17 / 0.13**; the heavy scene, whose code did not change, **0.71 / 0.72**, "
-            "0.44 / 0.42, **0.17 / 0.17** (0.68 / 0.65, 0.44 / 0.37 at 12:26). The Cornell "
+            "low level, against `llvm_ad_spectral`, `scalar_spectral` and Cycles, in the §2 "
+            "run of 18:15 (load 1–2; in brackets the run of 15:56, and the wavefront's of "
+            "12:26): the environment-lit scene **0.96 / 0.84**, 0.42 / **0.39**, **0.26 / "
+            "0.22** (0.99 / 0.90, 0.47 / 0.39; 1.05 / 0.92, 0.52 / 0.42); the textured scene "
+            "**0.64 / 0.46**, **0.30 / 0.20**, **0.14 / 0.13** (0.62 / 0.56, 0.27 / 0.20; "
+            "0.84 / 0.63, 0.39 / 0.26); the heavy scene, whose code did not change, **0.88 / "
+            "0.68**, 0.50 / **0.38**, **0.22 / 0.16** (0.71 / 0.72, 0.44 / 0.42). The Cornell "
             "box (12:10–12:36, load 1.0–2.5): `llvm_ad_spectral` **0.69 / 0.61** (0.98 / "
             "0.78 before whole paths), `scalar_spectral` **0.39 / 0.30** (0.48 / 0.41), M "
             "paths per CPU-second relray 0.90, `llvm_ad_spectral` 0.67, `scalar_spectral` "
             "0.36; Cycles (2 threads, CPU time) 0.31 / **0.25** (0.38 / 0.38).")
+    add("- **One whole-path kernel per kind of scene** (`whole_paths.kernel`, 2026-11-26 "
+        "17:55): whether the scene has an environment map or image textures (and whether "
+        "the benchmarks record the rays) are constants of the compiled code, a closure's "
+        "values, so numba prunes the branches they close and never compiles their callees "
+        "(numba keys each variant's on-disk cache by the closure's values). The Cornell "
+        "box's first image from the command line with an empty kernel cache takes 23 s "
+        "(53 s when the one kernel compiled the map's and textures' lookups for every "
+        "scene), Blender's first F12 of its default scene 17 s (47 s); the warm-up renders "
+        "each kind (151 s against 113 s, in the background). CPU per path unchanged "
+        "(`bench/ab.py`, 6 pairs: Cornell 0.99, quartiles 0.96–1.05; environment-lit "
+        "0.97, 0.89–1.09).")
+    add("- **The moving scene against the peers** (issue 12 item 1's scene with several "
+        "moving objects; §2, 18:15): the Cornell box as four bodies at β = 10⁻⁴, which the "
+        "peers render at rest. The converged images agree (luminance ratios 0.999–1.002, "
+        "mean ΔE00 0.61–0.71 in full GI with the references' noise, no structure in the "
+        "maps). Equal-error CPU time at equal relative MSE, high / low level: "
+        "`llvm_ad_spectral` 1.48 / 1.75, `scalar_spectral` 0.72 / 0.89, Cycles 0.37 / "
+        "0.36. Not met: a scene with moving bodies takes the wavefront integrator and the "
+        "rest-frame traversal of each body (§5b: one group about 1.3× the static box, "
+        "four groups about 1.7×), and the static box is itself only 0.69 of "
+        "`llvm_ad_spectral`'s time.")
+    add("- **The environment-lit scene's ΔE00 against Mitsuba, explained**: at equal "
+        "relative MSE, relray needed more time than Mitsuba's LLVM variant to reach equal "
+        "mean ΔE00 on that scene (1.21 / 1.59 in the 15:56 run), that is more colour "
+        "noise per unit of luminance noise. It is the hero wavelengths' pdf: "
+        "`python -m relray.bench.wavelength_pdf --scene environment` renders the scene "
+        "with relray's pdf (∝ |r̄|+|ḡ|+|b̄|, physics.md) and with Mitsuba's (∝ sech²(0.0072 "
+        "(λ − 538 nm))), all else equal (96², 6 seeds, each against its own 1024-spp "
+        "reference, 2026-11-26 18:12): mean ΔE00 at 4 / 16 / 64 spp 11.95 / 3.13 / 1.20 "
+        "against 14.92 / 2.00 / 0.83, relative MSE 0.067 / 0.0077 / 0.00127 against 0.143 / "
+        "0.0065 / 0.00135, Mitsuba's own figures there (15.0 / 2.35 / 0.91, 0.147 / 0.0081 / "
+        "0.00162) being those of the sech² pdf. On the Cornell box the sech² pdf is the "
+        "worse one (`--scene cornell`: ΔE00 9.36 / 3.69 / 1.81 against 10.04 / 3.74 / 1.97, "
+        "relative MSE 0.253 / 0.047 / 0.0100 against 0.318 / 0.050 / 0.0113), and the "
+        "CMF-sum pdf physics.md also allows is worse on the environment-lit scene (ΔE00 "
+        "15.1 / 3.42 / 1.25, by hand with the same harness). Neither pdf wins everywhere; "
+        "relray keeps the one physics.md prescribes.")
     add("- **Reference counting off the per-hit calls** (perf on the JIT code, "
         "2026-11-26): numba counts the references of the arrays a compiled function "
         "receives, with atomic instructions, unless it is compiled with `_nrt=False`. "
@@ -1812,13 +1850,17 @@ def _section_recommendations(add, d) -> None:
         "light sample (about 15 % of its samples in libm), and the two binary searches of "
         "the sampler; a guide table for the CDFs (as the wavelength sampler has) and a "
         "float32 conditional CDF would shorten the last two.")
-    add("3. **Whole paths for glossy and glass materials**: the principled material's "
+    add("3. **Whole paths for moving bodies** (the moving scene, 1.5–1.75× "
+        "`llvm_ad_spectral`'s equal-error time): each body's rest-frame traversal and its "
+        "Doppler factors inside the whole-path kernel, so a moving scene no longer "
+        "returns to Python between bounces.")
+    add("4. **Whole paths for glossy and glass materials**: the principled material's "
         "other lobes as branches of the whole-path kernel (the wavefront stays for moving "
         "bodies, alpha masks, area-light quads and the denoising features).")
-    add("4. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
+    add("5. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
         f"`Film.add_samples`, {_ns(d, 'film:'):.0f} ns per path): one pass, no (N, 3) "
         "array.")
-    add("5. **Cheaper random numbers**: `sobol2`'s bit reversals as LLVM's `bitreverse` "
+    add("6. **Cheaper random numbers**: `sobol2`'s bit reversals as LLVM's `bitreverse` "
         "intrinsic (a few % of the numbers' cost).")
     add("")
 
@@ -1851,8 +1893,10 @@ def _section_missing(add, d, meta) -> None:
             if r["ran"] not in (True, "True"):
                 add(f"- Mitsuba `{r['variant']}` did not run: {r['reason']}.")
         add("- Mitsuba 3 and Cycles are compared on the Cornell box, the heavy, the "
-            "environment-lit and the textured scenes; the moving scene of issue 12 item 1 "
-            "is not exported to the peers (neither has relray's relativistic motion).")
+            "environment-lit, the textured and the moving scenes; the moving scene's bodies "
+            "move at β = 10⁻⁴, where the peers' box at rest gives the same picture: neither "
+            "peer has relativistic motion, so a moving scene at a speed that changes the "
+            "picture has no peer to compare with.")
     add("- Error against time at β ≠ 0 (where the peers have no counterpart) is not "
         "measured.")
     add("")
