@@ -1719,10 +1719,12 @@ def _section_recommendations(add, d) -> None:
             "**0.64 / 0.46**, **0.30 / 0.20**, **0.14 / 0.13** (0.62 / 0.56, 0.27 / 0.20; "
             "0.84 / 0.63, 0.39 / 0.26); the heavy scene, whose code did not change, **0.88 / "
             "0.68**, 0.50 / **0.38**, **0.22 / 0.16** (0.71 / 0.72, 0.44 / 0.42). The Cornell "
-            "box (12:10–12:36, load 1.0–2.5): `llvm_ad_spectral` **0.69 / 0.61** (0.98 / "
-            "0.78 before whole paths), `scalar_spectral` **0.39 / 0.30** (0.48 / 0.41), M "
-            "paths per CPU-second relray 0.90, `llvm_ad_spectral` 0.67, `scalar_spectral` "
-            "0.36; Cycles (2 threads, CPU time) 0.31 / **0.25** (0.38 / 0.38).")
+            "box (18:30–18:42, load 0.4–1.9; in brackets 12:10–12:36, then before whole "
+            "paths): `llvm_ad_spectral` **0.60 / 0.61** (0.69 / 0.61; 0.98 / 0.78), "
+            "`scalar_spectral` **0.37 / 0.29** (0.39 / 0.30; 0.48 / 0.41), M paths per "
+            "CPU-second relray 0.79, `llvm_ad_spectral` 0.56, `scalar_spectral` 0.30 (0.90, "
+            "0.67, 0.36 at a lower load); Cycles (2 threads, CPU time) 0.37 / **0.25** (0.31 "
+            "/ 0.25; 0.38 / 0.38).")
     add("- **One whole-path kernel per kind of scene** (`whole_paths.kernel`, 2026-11-26 "
         "17:55): whether the scene has an environment map or image textures (and whether "
         "the benchmarks record the rays) are constants of the compiled code, a closure's "
