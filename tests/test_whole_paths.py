@@ -262,3 +262,17 @@ def test_paths_differing_counts_the_rows_beyond_the_relative_tolerance():
     b[3, 0] = 1.01        # beyond it
     assert whole_paths.paths_differing(a, b) == 0.25
     assert whole_paths.paths_differing(a, a) == 0.0
+
+
+def test_one_kernel_per_kind_of_scene_even_when_threads_ask_at_once():
+    """whole_paths.kernel: one compiled variant per (map, textures, record), the same
+    object for every caller, also for threads that ask at the same time."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    kinds = [(e, t, r) for e in (False, True) for t in (False, True) for r in (False, True)]
+    with ThreadPoolExecutor(8) as pool:
+        got = list(pool.map(lambda k: whole_paths.kernel(*k), kinds * 4))
+    by_kind = {}
+    for k, fn in zip(kinds * 4, got, strict=True):
+        assert by_kind.setdefault(k, fn) is fn
+    assert len({id(f) for f in by_kind.values()}) == len(kinds)

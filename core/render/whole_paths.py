@@ -47,6 +47,7 @@ path by path; ``bench/path_floor.py`` measures the two against Embree's own cost
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -402,15 +403,18 @@ _BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int3
 _NO_SPREAD = np.zeros(1, np.float32)
 #: the compiled variants, by (map, textures, record) (:func:`kernel`)
 _KERNELS: dict[tuple[bool, bool, bool], Any] = {}
+_KERNELS_LOCK = threading.Lock()
 
 
 def kernel(with_env: bool, with_tex: bool, record: bool = False) -> Any:
     """The whole-path kernel for scenes with or without an environment map and image
-    textures, recording the rays or not (:func:`_compile`); made once per kind."""
+    textures, recording the rays or not (:func:`_compile`); made once per kind, also
+    when several render threads ask for it at once."""
     key = (bool(with_env), bool(with_tex), bool(record))
-    if key not in _KERNELS:
-        _KERNELS[key] = _compile(*key)
-    return _KERNELS[key]
+    with _KERNELS_LOCK:
+        if key not in _KERNELS:
+            _KERNELS[key] = _compile(*key)
+        return _KERNELS[key]
 
 
 def scene_args(sc: KernelScene, accel: Accel) -> tuple:
