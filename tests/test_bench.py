@@ -142,15 +142,16 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     assert "### Mitsuba 3 as a peer" in text and "left out (--no-mitsuba)" in text
     assert {r["renderer"] for r in common.read_csv(out / "mitsuba_throughput.csv")} == \
         {"relray"}
-    # the heavy and environment scenes against the peers: relray's side always runs
-    assert "### The heavy, environment-lit and textured scenes" in text
+    # the peer scenes: relray's side always runs
+    assert "### The heavy, environment-lit, textured and moving scenes" in text
     peer_status = common.read_csv(out / "peer_status.csv")
     assert {(r["scene"], r["peer"]) for r in peer_status if r["ran"] == "False"} >= {
-        (s, v) for s in ("heavy", "environment", "textured")
+        (s, v) for s in ("heavy", "environment", "textured", "moving")
         for v in ("scalar_spectral", "llvm_ad_spectral")}
     peer_med = common.read_csv(out / "peer_medians.csv")
     assert {(r["scene"], r["series"]) for r in peer_med} >= {
-        ("heavy", "relray"), ("environment", "relray"), ("textured", "relray")}
+        (s, "relray") for s in ("heavy", "environment", "textured", "moving")}
+    assert (out / "peer_converged_moving.png").exists()
     assert {r["renderer"] for r in common.read_csv(out / "peer_load.csv")} == {"relray"}
     groups = {r["variant"]: r for r in common.read_csv(out / "velocity_groups.csv")}
     assert [groups[f"{n} groups"]["groups"] for n in (0, 1, 2, 4, 8)] == [0, 1, 2, 4, 8]
