@@ -109,10 +109,10 @@ def scene_bench(name: str, tmp: Path, width: int, height: int,
     else:
         raise ValueError(f"unknown peer scene {name!r}; choose from {SCENES}")
     job = replace(job, render=replace(job.render, width=width, height=height))
+    scene = build_scene(job)
     if name == "moving":
-        return cm.RelrayBench(job, scene=velocity_groups.grouped_scene(build_scene(job),
-                                                                       MOVING_GROUPS))
-    return cm.RelrayBench(job)
+        scene = velocity_groups.grouped_scene(scene, MOVING_GROUPS)
+    return cm.RelrayBench(job, scene=scene)
 
 
 def envmap_to_world(rotation_z_deg: float = 0.0) -> np.ndarray:
