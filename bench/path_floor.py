@@ -129,7 +129,8 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
 
     def run_whole(record: bool) -> tuple[int, int]:
         return whole_paths.lambert_paths(sc, prep.tracer, keys, o, d, lamu, spread, 4, depth,
-                                         True, L, first_t, log if record else None)
+                                         True, L, first_t,
+                                         log=log if record else None)
 
     buffers: dict = {}
 

@@ -74,15 +74,18 @@ def _write_image(path: Path, pixels: np.ndarray) -> str:
 
 
 def lambert_variants(folder: Path) -> list[dict[str, Any]]:
-    """:data:`LAMBERT_JOB` under an environment map, with image textures, and with both:
-    the whole-path kernel is compiled apart for each kind (``whole_paths.kernel``). Their
-    8 × 4 map and 2 × 2 texture are written into ``folder``."""
+    """:data:`LAMBERT_JOB` under an environment map, with image textures, with both, and
+    with its box moving: the whole-path kernel is compiled apart for each kind
+    (``whole_paths.kernel``). Their 8 × 4 map and 2 × 2 texture are written into
+    ``folder``."""
     sky = _write_image(folder / "sky.exr", np.full((4, 8, 3), 0.5))
     checker = _write_image(folder / "checker.exr", np.indices((2, 2, 3)).sum(axis=0) % 2)
     env = {**LAMBERT_JOB, "scene": {"environment": {"file": sky}}}
     tex = copy.deepcopy(LAMBERT_JOB)
     tex["materials"][0]["base_color_texture"] = checker
-    return [env, tex, {**tex, "scene": env["scene"]}]
+    moving = copy.deepcopy(LAMBERT_JOB)
+    moving["objects"][0]["velocity"] = [0.0, 0.0, 0.5]
+    return [env, tex, {**tex, "scene": env["scene"]}, moving]
 
 
 def warmup_jobs(folder: Path) -> list[dict[str, Any]]:

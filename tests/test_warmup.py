@@ -10,6 +10,7 @@ import pytest
 
 from relray.core import warmup
 from relray.core.render.frames import prepare
+from relray.core.render.rest_frames import MovingScene
 from relray.core.scene.geometry import build_scene
 from relray.core.scene.job import load_job, parse_job
 
@@ -30,24 +31,27 @@ def test_a_preset_passes_the_kernels_the_types_the_warm_up_compiled(preset, tmp_
 
 
 def whole_path_kernel(job):
-    """The whole-path kernel a job's scene runs, as (map, textures, argument types), or
-    None where the scene takes the wavefront (render/whole_paths.py)."""
+    """The whole-path kernel a job's scene runs, as (map, textures, moving bodies,
+    argument types), or None where the scene takes the wavefront
+    (render/whole_paths.py)."""
     from relray.core.render import whole_paths
 
     prep = prepare(build_scene(job), job.render.spectral)
     if not whole_paths.applies(prep.kernel, prep.tracer, False):
         return None
-    return (prep.kernel.env_on, prep.kernel.tex.enabled,
+    return (prep.kernel.env_on, prep.kernel.tex.enabled, isinstance(prep.tracer, MovingScene),
             tuple(numba.typeof(a) for a in whole_paths.scene_args(prep.kernel, prep.tracer)))
 
 
 def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
-    """The whole-path kernel is compiled apart for a map, textures, both and neither
-    (``whole_paths.kernel``): the warm-up renders each kind, with the argument types the
-    Cornell box (untextured) and the default fly-by (textured) pass."""
+    """The whole-path kernel is compiled apart for a map, textures, both and neither, and
+    for moving bodies (``whole_paths.kernel``): the warm-up renders each kind, with the
+    argument types the Cornell box (untextured), the default fly-by (textured) and the
+    train preset (moving bodies) pass."""
     warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
             for d in warmup.warmup_jobs(tmp_path)} - {None}
-    assert {(env, tex) for env, tex, _ in warm} == {(False, False), (True, False),
-                                                    (False, True), (True, True)}
-    for preset in ("cornell.toml", "flyby.toml"):
+    assert {kind[:3] for kind in warm} == {(False, False, False), (True, False, False),
+                                           (False, True, False), (True, True, False),
+                                           (False, False, True)}
+    for preset in ("cornell.toml", "flyby.toml", "moving/train.toml"):
         assert whole_path_kernel(load_job(PRESETS / preset)) in warm, preset

@@ -145,10 +145,28 @@ def _checker(data, folder: Path):
         m.update(base_color_texture=checker, normal_texture=tilt)
 
 
+def _moving_blocks(data):
+    """The two blocks move (two bodies, 0.4 c and 0.5 c), the room and the light rest."""
+    for o in data["objects"]:
+        if o["name"] == "short_block":
+            o["velocity"] = [0.4, 0.0, 0.0]
+        elif o["name"] == "tall_block":
+            o["velocity"] = [0.0, -0.3, 0.4]
+
+
+def _moving_room(data):
+    """Everything but the light is one body at 0.3 c: most bounces leave a body and land
+    on the same one again (its rest-frame form is reused)."""
+    for o in data["objects"]:
+        if o["name"] != "ceiling_light":
+            o["velocity"] = [0.3, 0.0, 0.0]
+
+
 def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
-    """A scene that takes whole paths: the Cornell box (plain, under a constant sky, or
-    with delta lights added) or :func:`environment_scene` (plain or on a transparent
-    film), moving towards the scene at ``beta`` (shifted lanes, aberration)."""
+    """A scene that takes whole paths: the Cornell box (plain, under a constant sky, with
+    delta lights added, or with moving bodies) or :func:`environment_scene` (plain or on
+    a transparent film), moving towards the scene at ``beta`` (shifted lanes,
+    aberration)."""
     name, _, change = scene.partition("+")
     data = environment_scene(tmp_path) if name == "environment" else cornell()
     data["render"].update(spectral=spectral, spp=8)
@@ -156,7 +174,8 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     if change in ("textures", "checker"):
         (_textures if change == "textures" else _checker)(data, tmp_path)
     elif change:
-        {"sky": _sky, "delta_lights": _delta_lights, "transparent": _transparent}[change](data)
+        {"sky": _sky, "delta_lights": _delta_lights, "transparent": _transparent,
+         "moving_blocks": _moving_blocks, "moving_room": _moving_room}[change](data)
     return data
 
 
@@ -167,7 +186,9 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     ("environment", "cie1931", 0.6), ("environment", "rgb", 0.0),
     ("environment+transparent", "cie1931", 0.0), ("cornell+textures", "cie1931", 0.0),
     ("cornell+textures", "cie1931", 0.6), ("cornell+textures", "rgb", 0.0),
-    ("environment+checker", "cie1931", 0.6)])
+    ("environment+checker", "cie1931", 0.6), ("cornell+moving_blocks", "cie1931", 0.0),
+    ("cornell+moving_blocks", "cie1931", 0.6), ("cornell+moving_blocks", "rgb", 0.0),
+    ("cornell+moving_room", "cie1931", 0.3)])
 def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
         tmp_path, scene, spectral, beta):
     fr, ev = renderer(scene_data(tmp_path, scene, spectral, beta), tmp_path)
@@ -176,16 +197,23 @@ def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
     depth = fr.settings.max_depth
     sky_seen = not fr.settings.transparent
     spread = 0.01  # the ray cones' start (textures' level of detail)
+    t0 = float(ev.t)
     L1, t1, seg1 = whole_paths.trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(),
-                                     d.copy(), lamu, nlanes, sky_seen=sky_seen, spread=spread)
+                                     d.copy(), lamu, nlanes, sky_seen=sky_seen, t0=t0,
+                                     spread=spread)
+    L1, t1, seg1 = L1.copy(), t1.copy(), seg1.copy()
     L2, t2, seg2, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
-                            nlanes, sky_seen=sky_seen, spread=spread)
+                            nlanes, sky_seen=sky_seen, t0=t0, spread=spread)
     assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
     if nlanes == 3:
         assert np.all(L1[:, 3] == 0.0)
     assert whole_paths.paths_differing(L1[:, :nlanes], L2[:, :nlanes]) <= 0.005
     np.testing.assert_array_equal(t1, t2)
-    assert np.all(seg1 == -1) and np.all(seg2 == -1)
+    np.testing.assert_array_equal(seg1, seg2)
+    if "moving" in scene:  # the camera sees the moving bodies
+        assert np.any(seg1 >= 0)
+    else:
+        assert np.all(seg1 == -1)
     if not sky_seen:  # a camera ray that escapes sees nothing
         assert np.all(L1[t1 >= 1e30] == 0.0) and np.any(t1 >= 1e30)
 
@@ -212,8 +240,15 @@ def _glass_walls(data):
     data["materials"][0]["transmission"] = 1.0
 
 
-def _moving_box(data):
-    data["objects"][0]["velocity"] = [0.0, 0.0, 0.3]
+def _moving_light(data):
+    for o in data["objects"]:
+        if o["name"] == "ceiling_light":
+            o["velocity"] = [0.0, 0.0, 0.3]
+
+
+def _moving_textured(data, folder: Path):
+    _moving_blocks(data)
+    _checker(data, folder)
 
 
 def _area_light(data):
@@ -233,11 +268,11 @@ def _alpha_mask(data, folder: Path):
     data["materials"][0]["alpha_mode"] = "mask"
 
 
-@pytest.mark.parametrize("change", [_metal_walls, _glass_walls, _moving_box, _area_light,
-                                    _metallic_map, _alpha_mask])
+@pytest.mark.parametrize("change", [_metal_walls, _glass_walls, _moving_light, _area_light,
+                                    _metallic_map, _alpha_mask, _moving_textured])
 def test_scenes_that_need_more_take_the_wavefront_integrator(tmp_path, change):
     data = cornell()
-    if change in (_metallic_map, _alpha_mask):
+    if change in (_metallic_map, _alpha_mask, _moving_textured):
         change(data, tmp_path)
     else:
         change(data)
@@ -265,11 +300,13 @@ def test_paths_differing_counts_the_rows_beyond_the_relative_tolerance():
 
 
 def test_one_kernel_per_kind_of_scene_even_when_threads_ask_at_once():
-    """whole_paths.kernel: one compiled variant per (map, textures, record), the same
-    object for every caller, also for threads that ask at the same time."""
+    """whole_paths.kernel: one compiled variant per (map, textures, moving bodies,
+    record), the same object for every caller, also for threads that ask at the same
+    time."""
     from concurrent.futures import ThreadPoolExecutor
+    from itertools import product
 
-    kinds = [(e, t, r) for e in (False, True) for t in (False, True) for r in (False, True)]
+    kinds = list(product((False, True), repeat=4))
     with ThreadPoolExecutor(8) as pool:
         got = list(pool.map(lambda k: whole_paths.kernel(*k), kinds * 4))
     by_kind = {}

@@ -413,7 +413,7 @@ class FrameRenderer:
                                               o_local, d_lab, lamu, nlanes,
                                               sky_seen=not s.transparent,
                                               buffers=keep.setdefault("whole", {}),
-                                              spread=spread)
+                                              t0=float(event.t), spread=spread)
         else:
             L, t_hit, seg, feats = trace(self.kernel, prep.tracer, s.max_depth, keys,
                                          o_local, d_lab, lamu, nlanes,

@@ -187,6 +187,18 @@ def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, _nrt=False)
+def nearest_one(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, t, cs,
+                rest):  # pragma: no cover - compiled
+    """:func:`nearest_ray` of one lab ray (its rest-frame form, if ``cs`` ≥ 0, in row 0 of
+    ``rest``), compiled as a function of its own for the whole-path kernel to call per
+    ray (:mod:`.whole_paths`): with this module's fast-math flags (the caller's
+    reassociation never reaches the rest-frame arithmetic) and without reference
+    counting, as :func:`blocked_ray`."""
+    return nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, t, cs,
+                       rest, 0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, _nrt=False)
 def moving_hits(static, box_lo, box_hi, st, rayhit, o, d, t, seg, rest, best, prim, bu, bv,
                 seg_hit):
     """:func:`nearest_ray` of lab rays (accelerator-local origins ``o``, unit ``d``, origin

@@ -53,8 +53,11 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ..physics.relativity import aberrate_doppler_ray
+from ..physics.spectrum import INV_DLOG
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
+from . import rest_frames as rf
 from .accel import MISS_DISTANCE, Accel
 from .embree import intersect1, occluded1, rayhit_buffer
 from .environment import (
@@ -71,14 +74,19 @@ from .integrator import (
     KernelScene,
     column,
     face_forward,
+    frame_change,
+    lab_offset,
     lerp,
+    lerp_at,
     offset_point,
     shading_normal,
     shadow_ray,
+    shadow_ray_from,
     surface_point,
     vertex_normal,
     wavefront_buffers,
 )
+from .rest_frames import MovingScene, blocked_ray, nearest_one, static_query_args
 from .sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -117,36 +125,42 @@ NO_LOG = (np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32),
 
 
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
-    """Whether :func:`lambert_paths` can trace the scene ``sc`` (module docstring): a
-    static BVH (``accel`` an :class:`.accel.Accel`), pure Lambert materials (no metallic
-    texture either), no alpha-masked material and no area-light quads, and no denoising
-    features asked for."""
+    """Whether :func:`lambert_paths` can trace the scene ``sc`` (module docstring): pure
+    Lambert materials (no metallic texture either), no alpha-masked material and no
+    area-light quads, and no denoising features asked for; a static BVH (``accel`` an
+    :class:`.accel.Accel`), or moving bodies (a :class:`.rest_frames.MovingScene`) in a
+    scene without image textures or an environment map whose lights all rest in the
+    lab."""
     w = np.asarray(sc.mat_w)
-    return (isinstance(accel, Accel) and not features and not sc.tex.cutouts
+    moving_ok = (isinstance(accel, MovingScene) and not sc.tex.enabled and not sc.env_on
+                 and not bool(np.any(np.asarray(sc.l_seg) >= 0)))
+    return ((isinstance(accel, Accel) or moving_ok) and not features and not sc.tex.cutouts
             and not bool(np.any(np.asarray(sc.tex.mat_tex)[:, METALLIC] >= 0))
             and len(sc.area_tris) == 0 and len(w) > 0
             and bool(np.all(w[:, 0] == 1.0) and np.all(w[:, 1:] == 0.0)))
 
 
-def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
+def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) -> Any:
     """The whole-path kernel for one kind of scene (:func:`kernel`): ``with_env`` an
-    environment map, ``with_tex`` image textures, ``record`` the benchmarks' ray log. The
-    three are constants of the compiled code, so numba prunes the branches they close and
-    never compiles those branches' callees (the map's sampler and lookups, the texture
-    lookups, the log): the Cornell box's kernel compiles in a fraction of the full one's
-    time. numba's on-disk cache keys each variant by its closure's values."""
+    environment map, ``with_tex`` image textures, ``with_moving`` moving bodies,
+    ``record`` the benchmarks' ray log. The four are constants of the compiled code, so
+    numba prunes the branches they close and never compiles those branches' callees (the
+    map's sampler and lookups, the texture lookups, the rest-frame tracing, the log): the
+    Cornell box's kernel compiles in a fraction of the full one's time. numba's on-disk
+    cache keys each variant by its closure's values."""
 
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
-    def lambert_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl,
+    def lambert_paths(tracer, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl,
                       emit, emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale,
                       l_spot, l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond,
-                      env_pmf, env_rot, env_row, env_nm, eps_base, tex, keys, o, d, lamu,
-                      spread, nlanes, max_depth, sky_seen, L, first_t,
-                      log):  # pragma: no cover - compiled
+                      env_pmf, env_rot, env_row, env_nm, eps_base, tex, seg_f, shift, beam,
+                      keys, o, d, lamu, spread, nlanes, max_depth, sky_seen, t0, L, first_t,
+                      first_seg, log):  # pragma: no cover - compiled
         """:func:`lambert_paths`' kernel; the scene arguments those of :func:`scene_args`,
         in its order, then :func:`lambert_paths`' own (``log``: :data:`NO_LOG` unless
         ``record``)."""
         f, w, addr = rayhit_buffer()
+        handle, box_lo, box_hi, segs = tracer
         rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
         # the texture table's arrays as locals (read from the tuple in the loop, each access
         # would count a reference)
@@ -160,12 +174,18 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
         lf = np.zeros(4, np.float64)
         thr = np.zeros(4, np.float64)
         rho = np.zeros(4, np.float64)
+        # moving bodies: the lanes' table coordinates (shifted in each body's rest frame),
+        # and the rest-frame form of a ray that leaves a body (row 0: origin in its BVH's
+        # coordinates, direction, k = D_out; rest_frames.nearest_ray)
+        lam = np.zeros(4, np.float32)
+        rest = np.zeros((1, 7), np.float32)
         n_rays = 0
         n_sh = 0
         for i in range(keys.shape[0]):
             key = keys[i]
             for j in range(4):
                 L[i, j] = 0.0
+                lam[j] = lamu[i, j]
             for j in range(nlanes):
                 li[j], lf[j] = column(lamu[i, j], top)
                 thr[j] = 1.0
@@ -182,6 +202,16 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
             cone0, cone1 = 0.0, 0.0  # the ray cone: width at the origin, spread angle
             if with_tex:
                 cone1 = np.float64(spread[i])
+            # moving bodies (integrator.shade's state of a path): the ray's origin lab time,
+            # the segment whose body it leaves (-1: none), the Doppler factor D_out whose
+            # shift of the lanes waits for the next hit (1: none), whether the last vertex
+            # was on a moving body
+            rt = t0
+            r_seg = -1
+            pend = 1.0
+            prev_moving = False
+            if with_moving:
+                first_seg[i] = -1
             if record:
                 bounces[i] = 0
             for depth in range(max_depth):
@@ -189,8 +219,20 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
                     rec_o[n_rays, 0], rec_o[n_rays, 1], rec_o[n_rays, 2] = ox, oy, oz
                     rec_d[n_rays, 0], rec_d[n_rays, 1], rec_d[n_rays, 2] = dx, dy, dz
                 n_rays += 1
-                t, tri, b1, b2 = intersect1(handle, f, w, addr, ox, oy, oz, dx, dy, dz,
-                                            MISS_DISTANCE)
+                sg = -1  # the moving segment hit (-1: the static scene)
+                if with_moving:
+                    t, tri, b1, b2, sg = nearest_one(handle, box_lo, box_hi, segs, f, w, addr,
+                                                     ox, oy, oz, dx, dy, dz, rt, r_seg, rest)
+                else:
+                    t, tri, b1, b2 = intersect1(handle, f, w, addr, ox, oy, oz, dx, dy, dz,
+                                                MISS_DISTANCE)
+                moving = with_moving and sg >= 0
+                if with_moving and pend != 1.0 and not moving:  # the lanes into the lab
+                    cols = math.log(pend) * INV_DLOG
+                    for j in range(nlanes):
+                        lam[j] += cols
+                        li[j], lf[j] = column(lam[j], top)
+                    pend = 1.0
                 if tri < 0:  # the sky or the map (none: black)
                     if depth == 0 and not sky_seen:
                         pass
@@ -203,6 +245,39 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
                     break
                 if depth == 0:
                     first_t[i] = t
+                    if with_moving:
+                        first_seg[i] = sg
+                # a moving body: the rest of the bounce happens in its rest frame S_u
+                # (integrator.shade's frame change; rest_frames' segment table)
+                t_ev = rt - t  # the hit's lab time
+                sh = (0.0, 0.0, 0.0)
+                sb, sig, sgam, scg = 0.0, 1.0, 1.0, 0.5
+                pl = (0.0, 0.0, 0.0)  # the hit's lab point
+                if moving:
+                    sh = (seg_f[sg, rf.H], seg_f[sg, rf.H + 1], seg_f[sg, rf.H + 2])
+                    sb, sig = seg_f[sg, rf.B], seg_f[sg, rf.IG]
+                    sgam, scg = seg_f[sg, rf.G], seg_f[sg, rf.C]
+                    pl = (np.float64(ox + t * dx), np.float64(oy + t * dy),
+                          np.float64(oz + t * dz))
+                    if r_seg == sg:  # back on the body it left: its rest-frame direction,
+                        # D_u = 1/D_out (the pending shift cancels, the D_out⁵ is undone)
+                        dx, dy, dz = rest[0, 3], rest[0, 4], rest[0, 5]
+                        if beam:
+                            k5, _ = frame_change(1.0 / np.float64(rest[0, 6]), False, beam)
+                            for j in range(nlanes):
+                                thr[j] *= k5
+                    else:
+                        rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1],
+                                                               -sh[2], sb, sig)
+                        dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
+                        k5, _ = frame_change(d_u, False, beam)
+                        # the shift into S_u with the one pending from the last body
+                        _, cols = frame_change(d_u * pend, shift, False)
+                        for j in range(nlanes):
+                            thr[j] *= k5
+                            lam[j] += cols
+                            li[j], lf[j] = column(lam[j], top)
+                    pend = 1.0
                 p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
                 g, front, cos_g = face_forward(g, np.float64(dx), np.float64(dy), np.float64(dz))
                 n = g  # the shading normal (interpolated vertex normals), g the geometric one
@@ -246,8 +321,14 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
                 if er >= 0 and (front or one_sided[m] == 0):
                     wt = 1.0
                     if depth > 0 and tri_pmf[tri] > 0.0:
-                        wt = power_heuristic(prev_pdf, lightmod.triangle_light_pdf(
-                            tri_pmf[tri], area[tri], t, cos_g))
+                        if not (moving and prev_moving):
+                            wt = power_heuristic(prev_pdf, lightmod.triangle_light_pdf(
+                                tri_pmf[tri], area[tri], t, cos_g))
+                        elif r_seg == sg:  # from a vertex of this very body: both pdfs per
+                            # rest-frame solid angle (integrator.shade)
+                            kr = np.float64(rest[0, 6])
+                            wt = power_heuristic(prev_pdf * kr * kr, lightmod.triangle_light_pdf(
+                                tri_pmf[tri], area[tri], t * kr, cos_g))
                     for j in range(nlanes):
                         L[i, j] += thr[j] * wt * lerp(emit, er, li[j], lf[j])
                 if depth + 1 >= max_depth:
@@ -272,16 +353,36 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
                             env_marg, env_cond, env_pmf, env_rot, p_sel, u1, u2)
                         is_env = True
                     else:
+                        # (from a moving vertex the lights are sampled in the lab, from its
+                        # lab point)
+                        x = pl if moving else p
                         wi, p_l, scale, delta, finite, target, ok = lightmod.sample_light(
                             lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot,
                                                   v0, e1, e2, ng, area, tri_mat, one_sided),
-                            p_sel, u1, u2, p[0], p[1], p[2], eps)
-                    cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+                            p_sel, u1, u2, x[0], x[1], x[2],
+                            ray_offset_at(eps_base, x[0], x[1], x[2]) if moving else eps)
+                    wn = wi  # the light's direction in the vertex's frame
+                    d_l = 1.0
+                    if moving:  # seen in S_u: w_u, D_out = γ_u (1 + u·w), pdf × D_out²
+                        wux, wuy, wuz, inv_dout = aberrate_doppler_ray(
+                            wi[0], wi[1], wi[2], -sh[0], -sh[1], -sh[2], sb, sig)
+                        d_l = 1.0 / inv_dout
+                        wn = (wux, wuy, wuz)
+                        p_l = p_l * d_l * d_l
+                    cos_i = wn[0] * n[0] + wn[1] * n[1] + wn[2] * n[2]
                     if ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0 \
-                            and wi[0] * g[0] + wi[1] * g[1] + wi[2] * g[2] > 0.0:
+                            and wn[0] * g[0] + wn[1] * g[1] + wn[2] * g[2] > 0.0:
                         c = (1.0 if delta else power_heuristic(p_l, cos_i * _INV_PI)) * cos_i \
                             * scale / p_l * _INV_PI
-                        so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
+                        t_sh = t_ev
+                        if moving:  # the offset origin as a lab event; the spectrum × D_out⁵
+                            if beam:
+                                c *= d_l * d_l * d_l * d_l * d_l
+                            so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
+                            so, sd, st = shadow_ray_from(so, target, wi, finite)
+                            t_sh = t_ev + dt_o
+                        else:
+                            so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
                         fo = (np.float32(so[0]), np.float32(so[1]), np.float32(so[2]))
                         fd = (np.float32(sd[0]), np.float32(sd[1]), np.float32(sd[2]))
                         if record:
@@ -289,13 +390,24 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
                             sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = fd
                             sh_t[n_sh] = st
                         n_sh += 1
-                        if not occluded1(handle, f, w, addr, fo[0], fo[1], fo[2], fd[0], fd[1],
-                                         fd[2], np.float32(st)):
+                        if with_moving:
+                            blocked = blocked_ray(handle, box_lo, box_hi, segs, f, w, addr, fo[0],
+                                                  fo[1], fo[2], fd[0], fd[1], fd[2],
+                                                  np.float32(st), t_sh)
+                        else:
+                            blocked = occluded1(handle, f, w, addr, fo[0], fo[1], fo[2], fd[0],
+                                                fd[1], fd[2], np.float32(st))
+                        if not blocked:
                             if with_env and is_env:
                                 v4 = env_texel_at(env_tex, texel[0], texel[1], rgb, env_nm, lam4,
                                                   base4)
                                 for j in range(nlanes):
                                     L[i, j] += thr[j] * rho[j] * c * v4[j]
+                            elif moving:  # the light's spectrum at D_out λ (lab)
+                                lshift = math.log(d_l) * INV_DLOG if shift else 0.0
+                                for j in range(nlanes):
+                                    L[i, j] += thr[j] * rho[j] * c * lerp_at(
+                                        emit, l_row[k], lam[j] + lshift, top)
                             else:
                                 row = l_row[k]
                                 for j in range(nlanes):
@@ -311,9 +423,22 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
                 prev_pdf = lz * _INV_PI
                 if prev_pdf <= 0.0 or wx * g[0] + wy * g[1] + wz * g[2] <= 0.0:
                     break
-                q = 0.0
                 for j in range(nlanes):
                     thr[j] *= rho[j]
+                d_out = 1.0
+                wr = (wx, wy, wz)  # a moving body's: in its rest frame
+                if moving:  # back into the lab: the direction, D_out⁵, the pdf per lab
+                    # solid angle; the lanes' shift waits for the next hit
+                    wx, wy, wz, d_out = aberrate_doppler_ray(wx, wy, wz, sh[0], sh[1], sh[2],
+                                                             sb, sig)
+                    k5, _ = frame_change(d_out, False, beam)
+                    for j in range(nlanes):
+                        thr[j] *= k5
+                    if shift:
+                        pend = d_out
+                    prev_pdf = prev_pdf / (d_out * d_out)
+                q = 0.0
+                for j in range(nlanes):
                     q = max(q, thr[j])
                 if depth + 1 >= RR_DEPTH and q < 1.0:
                     if rand(key, bounce_dim(depth, DIM_ROULETTE)) >= q:
@@ -323,7 +448,19 @@ def _compile(with_env: bool, with_tex: bool, record: bool) -> Any:
                 if with_tex:  # the cone goes on from this hit, widened by the bounce
                     cone0 = cone_w
                     cone1 = bounce_spread(cone1, a, False)
-                on = offset_point(p, g, eps, 1.0)
+                if moving:  # the next origin as a lab event, and the same ray in S_u
+                    on, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
+                    rt = t_ev + dt_o
+                    o_rest = offset_point(p, g, eps, 1.0)
+                    rest[0, 0], rest[0, 1], rest[0, 2] = o_rest[0], o_rest[1], o_rest[2]
+                    rest[0, 3], rest[0, 4], rest[0, 5] = wr[0], wr[1], wr[2]
+                    rest[0, 6] = d_out
+                    r_seg = sg
+                else:
+                    on = offset_point(p, g, eps, 1.0)
+                    rt = t_ev
+                    r_seg = -1
+                prev_moving = moving
                 ox, oy, oz = np.float32(on[0]), np.float32(on[1]), np.float32(on[2])
                 dx, dy, dz = np.float32(wx), np.float32(wy), np.float32(wz)
         return n_rays, n_sh
@@ -401,50 +538,64 @@ def env_radiance(L, i, thr, lam4, base4, nlanes, depth, prev_pdf, sky_pmf, env_t
 _BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int32))
 #: the ``spread`` of an untextured scene (its kernel never reads it)
 _NO_SPREAD = np.zeros(1, np.float32)
-#: the compiled variants, by (map, textures, record) (:func:`kernel`)
-_KERNELS: dict[tuple[bool, bool, bool], Any] = {}
+#: the ``first_seg`` of a static scene (its kernel never writes it)
+_NO_SEG = np.zeros(1, np.int32)
+#: the compiled variants, by (map, textures, moving bodies, record) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, bool, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def kernel(with_env: bool, with_tex: bool, record: bool = False) -> Any:
-    """The whole-path kernel for scenes with or without an environment map and image
-    textures, recording the rays or not (:func:`_compile`); made once per kind, also
-    when several render threads ask for it at once."""
-    key = (bool(with_env), bool(with_tex), bool(record))
+def kernel(with_env: bool, with_tex: bool, with_moving: bool = False,
+           record: bool = False) -> Any:
+    """The whole-path kernel for scenes with or without an environment map, image
+    textures and moving bodies, recording the rays or not (:func:`_compile`); made once
+    per kind, also when several render threads ask for it at once."""
+    key = (bool(with_env), bool(with_tex), bool(with_moving), bool(record))
     with _KERNELS_LOCK:
         if key not in _KERNELS:
             _KERNELS[key] = _compile(*key)
         return _KERNELS[key]
 
 
-def scene_args(sc: KernelScene, accel: Accel) -> tuple:
-    """The scene arguments of the compiled kernel (:func:`_compile`), in its order."""
-    return (accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
+def scene_args(sc: KernelScene, accel: Accel | MovingScene) -> tuple:
+    """The scene arguments of the compiled kernel (:func:`_compile`), in its order: first
+    the tracer's (:meth:`.rest_frames.MovingScene.query_args`, or a static BVH's
+    :func:`.rest_frames.static_query_args`)."""
+    tracer = (accel.query_args() if isinstance(accel, MovingScene)
+              else static_query_args(accel))
+    return (tracer, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
             sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
             sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
             sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond, sc.env_pmf,
-            sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex)
+            sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex, sc.seg_f, sc.shift, sc.beam)
 
 
-def lambert_paths(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
-                  d: np.ndarray, lamu: np.ndarray, spread: np.ndarray, nlanes: int,
-                  max_depth: int, sky_seen: bool, L: np.ndarray, first_t: np.ndarray,
+def lambert_paths(sc: KernelScene, accel: Accel | MovingScene, keys: np.ndarray,
+                  o: np.ndarray, d: np.ndarray, lamu: np.ndarray, spread: np.ndarray,
+                  nlanes: int, max_depth: int, sky_seen: bool, L: np.ndarray,
+                  first_t: np.ndarray, first_seg: np.ndarray | None = None, t0: float = 0.0,
                   log: tuple | None = None) -> tuple[int, int]:
-    """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
-    ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
-    its end through the scene ``sc`` (``accel``: its static BVH): its lab radiance per
-    lane into ``L[i]`` (lanes ≥ nlanes 0), the camera ray's hit distance into
-    ``first_t[i]`` (1e30: none). ``sky_seen`` False (a transparent film) hides the sky or
-    map from camera rays. With textures, ``spread[i]`` is the camera ray's lab spread
+    """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates, origin
+    lab time ``t0``; key ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``,
+    3: the rgb mode) to its end through the scene ``sc`` (``accel``: its static BVH, or
+    the :class:`.rest_frames.MovingScene`): its lab radiance per lane into ``L[i]``
+    (lanes ≥ nlanes 0), the camera ray's hit distance into ``first_t[i]`` (1e30: none)
+    and, with moving bodies, the segment it hit into ``first_seg[i]`` (-1: static; not
+    written for a static scene). ``sky_seen`` False (a transparent film) hides the sky
+    or map from camera rays. With textures, ``spread[i]`` is the camera ray's lab spread
     angle, the start of its ray cone (:func:`.textures.lab_spread`).
 
     ``log`` (benchmarks): every nearest-hit and every shadow ray, and the number of
     continuations of each path, into (origins, directions, shadow origins, shadow
     directions, shadow lengths, continuations per path), with room for ``max_depth`` rays
     of each kind per path. Returns (nearest-hit rays, shadow rays)."""
-    run = kernel(sc.env_on, sc.tex.enabled, log is not None)
+    moving = isinstance(accel, MovingScene)
+    if moving and first_seg is None:
+        raise ValueError("lambert_paths: a scene with moving bodies needs first_seg")
+    run = kernel(sc.env_on, sc.tex.enabled, moving, log is not None)
     return run(*scene_args(sc, accel), keys, o, d, lamu, spread, nlanes, max_depth, sky_seen,
-               L, first_t, NO_LOG if log is None else log)
+               float(t0), L, first_t, _NO_SEG if first_seg is None else first_seg,
+               NO_LOG if log is None else log)
 
 
 def paths_differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
@@ -457,17 +608,19 @@ def paths_differing(a: np.ndarray, b: np.ndarray, rel: float = 1e-4) -> float:
     return float(np.mean(np.any(np.abs(a - b) > tol, axis=1)))
 
 
-def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
+def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
-          sky_seen: bool = True, buffers: dict | None = None,
+          sky_seen: bool = True, buffers: dict | None = None, t0: float = 0.0,
           spread: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`.integrator.trace` for a scene where :func:`applies`: (L (N, 4) lab radiance,
-    the camera rays' hit distances (1e30: none), their moving segments (all -1)), the
-    arrays kept in ``buffers`` until its next use (:func:`.integrator.wavefront_buffers`).
-    ``o_local``/``d`` float32 (N, 3) camera rays in accelerator coordinates, ``lamu`` the
-    lanes' table coordinates (N, 4); ``sky_seen`` False hides the sky or map from the
-    camera rays (a transparent film); ``spread``: the camera rays' lab spread angles ((N,)
-    or one for all), the ray cones' start for the textures' level of detail."""
+    the camera rays' hit distances (1e30: none), the moving segments they hit (-1: the
+    static scene)), the arrays kept in ``buffers`` until its next use
+    (:func:`.integrator.wavefront_buffers`). ``o_local``/``d`` float32 (N, 3) camera rays
+    in accelerator coordinates, ``lamu`` the lanes' table coordinates (N, 4); ``sky_seen``
+    False hides the sky or map from the camera rays (a transparent film); ``t0`` the lab
+    time of the camera rays' origin event (moving bodies); ``spread``: the camera rays'
+    lab spread angles ((N,) or one for all), the ray cones' start for the textures' level
+    of detail."""
     n = len(keys)
     b = wavefront_buffers(n, buffers, _BUFFERS)
     b["seg"][:] = -1
@@ -475,5 +628,5 @@ def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
               if sc.tex.enabled else _NO_SPREAD)
     lambert_paths(sc, accel, keys, np.ascontiguousarray(o_local, np.float32),
                   np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-                  spread, nlanes, max_depth, sky_seen, b["L"], b["first_t"])
+                  spread, nlanes, max_depth, sky_seen, b["L"], b["first_t"], b["seg"], t0)
     return b["L"], b["first_t"], b["seg"]
