@@ -47,11 +47,11 @@ def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
     """The whole-path kernel is compiled apart for a map, textures, both and neither, and
     for moving bodies (``whole_paths.kernel``): the warm-up renders each kind, with the
     argument types the Cornell box (untextured), the default fly-by (textured) and the
-    train preset (moving bodies) pass."""
+    train and Terrell presets (moving bodies, moving lights) pass."""
     warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
             for d in warmup.warmup_jobs(tmp_path)} - {None}
     assert {kind[:3] for kind in warm} == {(False, False, False), (True, False, False),
                                            (False, True, False), (True, True, False),
                                            (False, False, True)}
-    for preset in ("cornell.toml", "flyby.toml", "moving/train.toml"):
+    for preset in ("cornell.toml", "flyby.toml", "moving/train.toml", "moving/terrell.toml"):
         assert whole_path_kernel(load_job(PRESETS / preset)) in warm, preset

@@ -162,6 +162,28 @@ def _moving_room(data):
             o["velocity"] = [0.3, 0.0, 0.0]
 
 
+def _moving_light(data):
+    """The light moves (0.15 c along the ceiling, sampled in its rest frame from the static
+    vertices)."""
+    for o in data["objects"]:
+        if o["name"] == "ceiling_light":
+            o["velocity"] = [0.15, 0.0, 0.0]
+
+
+def _moving_blocks_and_light(data):
+    """The blocks and the light move, each its own body: a moving vertex does not sample
+    another body's light (BSDF sampling finds it)."""
+    _moving_blocks(data)
+    _moving_light(data)
+
+
+def _moving_all(data):
+    """The room and its light are one body: the light is sampled in their common rest
+    frame."""
+    for o in data["objects"]:
+        o["velocity"] = [0.3, 0.0, 0.0]
+
+
 def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     """A scene that takes whole paths: the Cornell box (plain, under a constant sky, with
     delta lights added, or with moving bodies) or :func:`environment_scene` (plain or on
@@ -171,11 +193,15 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     data = environment_scene(tmp_path) if name == "environment" else cornell()
     data["render"].update(spectral=spectral, spp=8)
     data["motion"]["beta"] = [0.0, beta, 0.0]
-    if change in ("textures", "checker"):
+    if change in ("textures", "checker", "moving_textured"):
+        if change == "moving_textured":
+            _moving_blocks(data)
         (_textures if change == "textures" else _checker)(data, tmp_path)
     elif change:
         {"sky": _sky, "delta_lights": _delta_lights, "transparent": _transparent,
-         "moving_blocks": _moving_blocks, "moving_room": _moving_room}[change](data)
+         "moving_blocks": _moving_blocks, "moving_room": _moving_room,
+         "moving_light": _moving_light, "moving_blocks_and_light": _moving_blocks_and_light,
+         "moving_all": _moving_all}[change](data)
     return data
 
 
@@ -188,7 +214,9 @@ def scene_data(tmp_path: Path, scene: str, spectral: str, beta: float) -> dict:
     ("cornell+textures", "cie1931", 0.6), ("cornell+textures", "rgb", 0.0),
     ("environment+checker", "cie1931", 0.6), ("cornell+moving_blocks", "cie1931", 0.0),
     ("cornell+moving_blocks", "cie1931", 0.6), ("cornell+moving_blocks", "rgb", 0.0),
-    ("cornell+moving_room", "cie1931", 0.3)])
+    ("cornell+moving_room", "cie1931", 0.3), ("cornell+moving_light", "cie1931", 0.0),
+    ("cornell+moving_blocks_and_light", "cie1931", 0.4), ("cornell+moving_all", "cie1931", 0.0),
+    ("cornell+moving_textured", "cie1931", 0.5)])
 def test_whole_paths_give_the_wavefront_integrators_radiance_path_by_path(
         tmp_path, scene, spectral, beta):
     fr, ev = renderer(scene_data(tmp_path, scene, spectral, beta), tmp_path)
@@ -240,15 +268,9 @@ def _glass_walls(data):
     data["materials"][0]["transmission"] = 1.0
 
 
-def _moving_light(data):
-    for o in data["objects"]:
-        if o["name"] == "ceiling_light":
-            o["velocity"] = [0.0, 0.0, 0.3]
-
-
-def _moving_textured(data, folder: Path):
+def _moving_environment(data, folder: Path):
     _moving_blocks(data)
-    _checker(data, folder)
+    data["scene"]["environment"] = {"file": str(write_sky_map(folder / "sky.exr"))}
 
 
 def _area_light(data):
@@ -268,11 +290,11 @@ def _alpha_mask(data, folder: Path):
     data["materials"][0]["alpha_mode"] = "mask"
 
 
-@pytest.mark.parametrize("change", [_metal_walls, _glass_walls, _moving_light, _area_light,
-                                    _metallic_map, _alpha_mask, _moving_textured])
+@pytest.mark.parametrize("change", [_metal_walls, _glass_walls, _area_light, _metallic_map,
+                                    _alpha_mask, _moving_environment])
 def test_scenes_that_need_more_take_the_wavefront_integrator(tmp_path, change):
     data = cornell()
-    if change in (_metallic_map, _alpha_mask, _moving_textured):
+    if change in (_metallic_map, _alpha_mask, _moving_environment):
         change(data, tmp_path)
     else:
         change(data)

@@ -72,6 +72,7 @@ from .integrator import (
     FAST_MATH,
     RR_DEPTH,
     KernelScene,
+    body_shadow_ray,
     column,
     face_forward,
     frame_change,
@@ -83,6 +84,7 @@ from .integrator import (
     shadow_ray,
     shadow_ray_from,
     surface_point,
+    to_rest,
     vertex_normal,
     wavefront_buffers,
 )
@@ -129,11 +131,9 @@ def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     Lambert materials (no metallic texture either), no alpha-masked material and no
     area-light quads, and no denoising features asked for; a static BVH (``accel`` an
     :class:`.accel.Accel`), or moving bodies (a :class:`.rest_frames.MovingScene`) in a
-    scene without image textures or an environment map whose lights all rest in the
-    lab."""
+    scene without an environment map."""
     w = np.asarray(sc.mat_w)
-    moving_ok = (isinstance(accel, MovingScene) and not sc.tex.enabled and not sc.env_on
-                 and not bool(np.any(np.asarray(sc.l_seg) >= 0)))
+    moving_ok = isinstance(accel, MovingScene) and not sc.env_on
     return ((isinstance(accel, Accel) or moving_ok) and not features and not sc.tex.cutouts
             and not bool(np.any(np.asarray(sc.tex.mat_tex)[:, METALLIC] >= 0))
             and len(sc.area_tris) == 0 and len(w) > 0
@@ -153,7 +153,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
     def lambert_paths(tracer, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl,
                       emit, emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale,
                       l_spot, l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond,
-                      env_pmf, env_rot, env_row, env_nm, eps_base, tex, seg_f, shift, beam,
+                      env_pmf, env_rot, env_row, env_nm, eps_base, tex, seg_f, l_seg, shift, beam,
                       keys, o, d, lamu, spread, nlanes, max_depth, sky_seen, t0, L, first_t,
                       first_seg, log):  # pragma: no cover - compiled
         """:func:`lambert_paths`' kernel; the scene arguments those of :func:`scene_args`,
@@ -174,10 +174,10 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
         lf = np.zeros(4, np.float64)
         thr = np.zeros(4, np.float64)
         rho = np.zeros(4, np.float64)
-        # moving bodies: the lanes' table coordinates (shifted in each body's rest frame),
-        # and the rest-frame form of a ray that leaves a body (row 0: origin in its BVH's
-        # coordinates, direction, k = D_out; rest_frames.nearest_ray)
-        lam = np.zeros(4, np.float32)
+        # the lanes' table coordinates (row 0; with moving bodies shifted in each body's rest
+        # frame), and the rest-frame form of a ray that leaves a body (row 0: origin in its
+        # BVH's coordinates, direction, k = D_out; rest_frames.nearest_ray)
+        lam = np.zeros((1, 4), np.float32)
         rest = np.zeros((1, 7), np.float32)
         n_rays = 0
         n_sh = 0
@@ -185,7 +185,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
             key = keys[i]
             for j in range(4):
                 L[i, j] = 0.0
-                lam[j] = lamu[i, j]
+                lam[0, j] = lamu[i, j]
             for j in range(nlanes):
                 li[j], lf[j] = column(lamu[i, j], top)
                 thr[j] = 1.0
@@ -230,8 +230,8 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 if with_moving and pend != 1.0 and not moving:  # the lanes into the lab
                     cols = math.log(pend) * INV_DLOG
                     for j in range(nlanes):
-                        lam[j] += cols
-                        li[j], lf[j] = column(lam[j], top)
+                        lam[0, j] += cols
+                        li[j], lf[j] = column(lam[0, j], top)
                     pend = 1.0
                 if tri < 0:  # the sky or the map (none: black)
                     if depth == 0 and not sky_seen:
@@ -275,8 +275,8 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                         _, cols = frame_change(d_u * pend, shift, False)
                         for j in range(nlanes):
                             thr[j] *= k5
-                            lam[j] += cols
-                            li[j], lf[j] = column(lam[j], top)
+                            lam[0, j] += cols
+                            li[j], lf[j] = column(lam[0, j], top)
                     pend = 1.0
                 p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
                 g, front, cos_g = face_forward(g, np.float64(dx), np.float64(dy), np.float64(dz))
@@ -312,7 +312,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                                                         uv[1], lod, t_nscale[m], n0, e1, e2, tri,
                                                         duv1, duv2), g, dx, dy, dz)
                     if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
-                        texture_emission(L, i, thr, li, lf, lamu, nlanes, t_rgb, t_estr[m], emit,
+                        texture_emission(L, i, thr, li, lf, lam, nlanes, t_rgb, t_estr[m], emit,
                                          t_d65, t_cscale, t_cdata,
                                          slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
                                                     t_mat_factor, t_mat_lod, m, np.int64(EMISSION),
@@ -334,7 +334,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 if depth + 1 >= max_depth:
                     break
                 if tex_base:  # the texel's spectrum at each lane (rgb: its channels)
-                    texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamu, i, t_uvir[m, 0],
+                    texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lam, 0, t_uvir[m, 0],
                                       t_uvir[m, 1], nlanes, rho)
                 else:
                     for j in range(nlanes):
@@ -347,40 +347,78 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                     u1 = rescale_uniform(u_a, lo, p_sel)
                     is_env = False
                     texel = (0, 0)
+                    ls = l_seg[k] if with_moving else -1  # a moving light's segment
+                    light_moves = ls >= 0
+                    same_body = moving and ls == sg  # a light of the vertex's own body
                     # (without a map, the branch and its callees are not compiled)
                     if with_env and l_kind[k] == lightmod.ENV:
                         (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
                             env_marg, env_cond, env_pmf, env_rot, p_sel, u1, u2)
                         is_env = True
                     else:
-                        # (from a moving vertex the lights are sampled in the lab, from its
-                        # lab point)
-                        x = pl if moving else p
+                        # with moving bodies (integrator.shade): a light of the vertex's own
+                        # body is sampled in their common rest frame; from a moving vertex
+                        # the others in the lab, from its lab point; a moving light from a
+                        # static vertex in its rest frame, from the vertex's event there
+                        x, eps_x = p, eps
+                        if moving and not same_body:
+                            x = pl
+                            eps_x = ray_offset_at(eps_base, pl[0], pl[1], pl[2])
+                        elif light_moves and not same_body:
+                            x = to_rest(p, t_ev, (seg_f[ls, rf.H], seg_f[ls, rf.H + 1],
+                                                  seg_f[ls, rf.H + 2]), seg_f[ls, rf.B],
+                                        seg_f[ls, rf.G], seg_f[ls, rf.C], seg_f[ls, rf.T_REF],
+                                        (seg_f[ls, rf.Q], seg_f[ls, rf.Q + 1],
+                                         seg_f[ls, rf.Q + 2]),
+                                        (seg_f[ls, rf.CEN], seg_f[ls, rf.CEN + 1],
+                                         seg_f[ls, rf.CEN + 2]))
                         wi, p_l, scale, delta, finite, target, ok = lightmod.sample_light(
                             lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot,
                                                   v0, e1, e2, ng, area, tri_mat, one_sided),
-                            p_sel, u1, u2, x[0], x[1], x[2],
-                            ray_offset_at(eps_base, x[0], x[1], x[2]) if moving else eps)
+                            p_sel, u1, u2, x[0], x[1], x[2], eps_x)
                     wn = wi  # the light's direction in the vertex's frame
-                    d_l = 1.0
-                    if moving:  # seen in S_u: w_u, D_out = γ_u (1 + u·w), pdf × D_out²
+                    d_l = 1.0  # the Doppler factor the light's spectrum is looked up with
+                    r_l = 0.0  # a moving light's lab distance
+                    if moving and not same_body:  # seen in S_u: w_u, D_out = γ_u (1 + u·w),
+                        # pdf × D_out²; a light of another moving body is not sampled
                         wux, wuy, wuz, inv_dout = aberrate_doppler_ray(
                             wi[0], wi[1], wi[2], -sh[0], -sh[1], -sh[2], sb, sig)
                         d_l = 1.0 / inv_dout
                         wn = (wux, wuy, wuz)
                         p_l = p_l * d_l * d_l
+                        ok = ok and not light_moves
+                    elif light_moves and not same_body:  # into the lab: the direction,
+                        # D_e = ν_lab/ν_rest, the pdf p_r D_e², the distance r D_e
+                        wlx, wly, wlz, d_x = aberrate_doppler_ray(
+                            wi[0], wi[1], wi[2], seg_f[ls, rf.H], seg_f[ls, rf.H + 1],
+                            seg_f[ls, rf.H + 2], seg_f[ls, rf.B], seg_f[ls, rf.IG])
+                        d_l = 1.0 / d_x
+                        rx, ry, rz = target[0] - x[0], target[1] - x[1], target[2] - x[2]
+                        r_l = math.sqrt(rx * rx + ry * ry + rz * rz) * d_l
+                        wi = (wlx, wly, wlz)
+                        wn = wi
+                        p_l = p_l * d_l * d_l
+                    shifted = (moving or light_moves) and not same_body
                     cos_i = wn[0] * n[0] + wn[1] * n[1] + wn[2] * n[2]
                     if ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0 \
                             and wn[0] * g[0] + wn[1] * g[1] + wn[2] * g[2] > 0.0:
                         c = (1.0 if delta else power_heuristic(p_l, cos_i * _INV_PI)) * cos_i \
                             * scale / p_l * _INV_PI
+                        if shifted and beam:  # the spectrum × D_l⁵
+                            c *= d_l * d_l * d_l * d_l * d_l
                         t_sh = t_ev
-                        if moving:  # the offset origin as a lab event; the spectrum × D_out⁵
-                            if beam:
-                                c *= d_l * d_l * d_l * d_l * d_l
+                        if same_body:  # rest frame to rest frame, as the lab ray
+                            so, sd, st, dt_o = body_shadow_ray(p, pl, g, eps, target, sh, sb, sig,
+                                                               sgam, scg)
+                            t_sh = t_ev + dt_o
+                        elif moving:  # the offset origin as a lab event
                             so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
                             so, sd, st = shadow_ray_from(so, target, wi, finite)
                             t_sh = t_ev + dt_o
+                        elif light_moves:  # towards the light's emission event, r_l away
+                            so, sd, st = shadow_ray(p, g, eps, (p[0] + wi[0] * r_l,
+                                                                p[1] + wi[1] * r_l,
+                                                                p[2] + wi[2] * r_l), wi, True)
                         else:
                             so, sd, st = shadow_ray(p, g, eps, target, wi, finite)
                         fo = (np.float32(so[0]), np.float32(so[1]), np.float32(so[2]))
@@ -403,11 +441,11 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                                                   base4)
                                 for j in range(nlanes):
                                     L[i, j] += thr[j] * rho[j] * c * v4[j]
-                            elif moving:  # the light's spectrum at D_out λ (lab)
+                            elif shifted:  # the light's spectrum at D_l λ
                                 lshift = math.log(d_l) * INV_DLOG if shift else 0.0
                                 for j in range(nlanes):
                                     L[i, j] += thr[j] * rho[j] * c * lerp_at(
-                                        emit, l_row[k], lam[j] + lshift, top)
+                                        emit, l_row[k], lam[0, j] + lshift, top)
                             else:
                                 row = l_row[k]
                                 for j in range(nlanes):
@@ -469,10 +507,11 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def texture_emission(L, i, thr, li, lf, lamu, nlanes, rgb_mode, strength, emit, d65_row,
+def texture_emission(L, i, thr, li, lf, lam, nlanes, rgb_mode, strength, emit, d65_row,
                      cscale, cdata, texel):
     """Add to ``L[i]`` the emission texel (r, g, b, a) times ``strength`` and the
-    throughput: an RGB emitter per texel, L = strength · s(λ) · D65_ext(λ)
+    throughput (the path's lanes: table coordinates ``lam[0]``, columns ``li``/``lf``):
+    an RGB emitter per texel, L = strength · s(λ) · D65_ext(λ)
     (:func:`.textures.texel_emission`; the rgb mode: its channels), met by BSDF sampling
     only (MIS weight 1), as in :func:`.integrator.shade`. Compiled apart without reference
     counting."""
@@ -483,7 +522,7 @@ def texture_emission(L, i, thr, li, lf, lamu, nlanes, rgb_mode, strength, emit, 
         L[i, 2] += thr[2] * strength * eb_
         return
     for j in range(nlanes):
-        L[i, j] += thr[j] * strength * texel_emission(er_, eg_, eb_, cscale, cdata, lamu, i,
+        L[i, j] += thr[j] * strength * texel_emission(er_, eg_, eb_, cscale, cdata, lam, 0,
                                                       j) * lerp(emit, d65_row, li[j], lf[j])
 
 
@@ -567,7 +606,8 @@ def scene_args(sc: KernelScene, accel: Accel | MovingScene) -> tuple:
             sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
             sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
             sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond, sc.env_pmf,
-            sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex, sc.seg_f, sc.shift, sc.beam)
+            sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex, sc.seg_f, sc.l_seg,
+            sc.shift, sc.beam)
 
 
 def lambert_paths(sc: KernelScene, accel: Accel | MovingScene, keys: np.ndarray,
