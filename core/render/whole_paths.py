@@ -129,12 +129,11 @@ NO_LOG = (np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32),
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     """Whether :func:`lambert_paths` can trace the scene ``sc`` (module docstring): pure
     Lambert materials (no metallic texture either), no alpha-masked material and no
-    area-light quads, and no denoising features asked for; a static BVH (``accel`` an
-    :class:`.accel.Accel`), or moving bodies (a :class:`.rest_frames.MovingScene`) in a
-    scene without an environment map."""
+    area-light quads, and no denoising features asked for; ``accel`` a static BVH (an
+    :class:`.accel.Accel`) or the BVHs of a scene with moving bodies (a
+    :class:`.rest_frames.MovingScene`)."""
     w = np.asarray(sc.mat_w)
-    moving_ok = isinstance(accel, MovingScene) and not sc.env_on
-    return ((isinstance(accel, Accel) or moving_ok) and not features and not sc.tex.cutouts
+    return (isinstance(accel, (Accel, MovingScene)) and not features and not sc.tex.cutouts
             and not bool(np.any(np.asarray(sc.tex.mat_tex)[:, METALLIC] >= 0))
             and len(sc.area_tris) == 0 and len(w) > 0
             and bool(np.all(w[:, 0] == 1.0) and np.all(w[:, 1:] == 0.0)))
@@ -190,11 +189,10 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 li[j], lf[j] = column(lamu[i, j], top)
                 thr[j] = 1.0
             # the map's lookups: the lanes' λ and E(λ), fixed along a path in a static scene
+            # (with moving bodies made again whenever the lanes shift)
             lam4 = base4 = (0.0, 0.0, 0.0, 0.0)
             if with_env:
-                lam4 = lane_lambdas((np.float64(lamu[i, 0]), np.float64(lamu[i, 1]),
-                                     np.float64(lamu[i, 2]), np.float64(lamu[i, 3])), rgb)
-                base4 = env_base(emit, env_row, li, lf, nlanes)
+                lam4, base4 = env_lanes_at(emit, env_row, lam, 0.0, rgb, nlanes)
             ox, oy, oz = o[i, 0], o[i, 1], o[i, 2]
             dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
             first_t[i] = MISS_DISTANCE
@@ -233,6 +231,8 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                         lam[0, j] += cols
                         li[j], lf[j] = column(lam[0, j], top)
                     pend = 1.0
+                    if with_env:
+                        lam4, base4 = env_lanes_at(emit, env_row, lam, 0.0, rgb, nlanes)
                 if tri < 0:  # the sky or the map (none: black)
                     if depth == 0 and not sky_seen:
                         pass
@@ -277,6 +277,8 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                             thr[j] *= k5
                             lam[0, j] += cols
                             li[j], lf[j] = column(lam[0, j], top)
+                        if with_env:
+                            lam4, base4 = env_lanes_at(emit, env_row, lam, 0.0, rgb, nlanes)
                     pend = 1.0
                 p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
                 g, front, cos_g = face_forward(g, np.float64(dx), np.float64(dy), np.float64(dz))
@@ -437,8 +439,15 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                                                 fd[1], fd[2], np.float32(st))
                         if not blocked:
                             if with_env and is_env:
-                                v4 = env_texel_at(env_tex, texel[0], texel[1], rgb, env_nm, lam4,
-                                                  base4)
+                                if shifted:  # from a moving vertex: the lanes at D_out λ
+                                    lam4s, base4s = env_lanes_at(
+                                        emit, env_row, lam,
+                                        math.log(d_l) * INV_DLOG if shift else 0.0, rgb, nlanes)
+                                    v4 = env_texel_at(env_tex, texel[0], texel[1], rgb, env_nm,
+                                                      lam4s, base4s)
+                                else:
+                                    v4 = env_texel_at(env_tex, texel[0], texel[1], rgb, env_nm,
+                                                      lam4, base4)
                                 for j in range(nlanes):
                                     L[i, j] += thr[j] * rho[j] * c * v4[j]
                             elif shifted:  # the light's spectrum at D_l λ
@@ -526,13 +535,19 @@ def texture_emission(L, i, thr, li, lf, lam, nlanes, rgb_mode, strength, emit, d
                                                       j) * lerp(emit, d65_row, li[j], lf[j])
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def env_base(emit, env_row, li, lf, nlanes):
-    """E(λ) of the map's emission row at the path's lanes (table columns ``li``, ``lf``;
-    the fourth 0 in the rgb mode): :func:`.environment.env_lanes`' ``base``."""
-    return (lerp(emit, env_row, li[0], lf[0]), lerp(emit, env_row, li[1], lf[1]),
-            lerp(emit, env_row, li[2], lf[2]),
-            lerp(emit, env_row, li[3], lf[3]) if nlanes == 4 else 0.0)
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def env_lanes_at(emit, env_row, lam, cols, rgb, nlanes):
+    """The map's lookups for the path's lanes at table coordinates ``lam[0]`` + ``cols``:
+    their wavelengths (nm, :func:`.environment.lane_lambdas`) and E(λ) of the map's
+    emission row there (the fourth 0 in the rgb mode), :func:`.environment.env_lanes`'
+    ``base``. Compiled apart without reference counting."""
+    top = emit.shape[1] - 1
+    lu = (np.float64(lam[0, 0]) + cols, np.float64(lam[0, 1]) + cols,
+          np.float64(lam[0, 2]) + cols, np.float64(lam[0, 3]) + cols)
+    return lane_lambdas(lu, rgb), (lerp_at(emit, env_row, lu[0], top),
+                                   lerp_at(emit, env_row, lu[1], top),
+                                   lerp_at(emit, env_row, lu[2], top),
+                                   lerp_at(emit, env_row, lu[3], top) if nlanes == 4 else 0.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
