@@ -266,8 +266,8 @@ class FrameRenderer:
         self.kernel = prep.kernel._replace(shift=self.doppler, beam=self.searchlight)
         # the denoising albedo/normal AOVs: traced only when asked for
         self.features = "albedo" in self.aovs or "normal" in self.aovs
-        # a static scene of Lambert surfaces (no alpha masks, no area-light quads): whole
-        # paths in one kernel call (whole_paths.py), else the wavefront integrator
+        # a scene of Lambert surfaces (no alpha masks, no area-light quads), moving or not:
+        # whole paths in one kernel call (whole_paths.py), else the wavefront integrator
         self.whole_paths = whole_paths.applies(self.kernel, prep.tracer, self.features)
         self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
 

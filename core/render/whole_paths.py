@@ -1,18 +1,31 @@
-"""Whole paths in one kernel call, for the static scenes whose surfaces are all Lambert
+"""Whole paths in one kernel call, for the scenes whose surfaces are all Lambert
 (issue 12: skip what a scene does not need).
 
 The wavefront integrator (:func:`.integrator.trace`) carries every path's state in
 arrays from bounce to bounce, returns to Python between bounces, and runs one general
 kernel (:func:`.integrator.shade`: the principled material's lobes, textures, moving
-bodies, alpha masks, area-light quads, the denoising features). A static scene whose
-materials are all pure Lambert (diffuse weight 1, no metal or glass lobe, no metallic
-map), with no alpha-masked material and no area-light quads (:func:`applies`), needs
-none of that: :func:`lambert_paths` traces each path to its end in one loop, Embree's
+bodies, alpha masks, area-light quads, the denoising features). A scene whose materials
+are all pure Lambert (diffuse weight 1, no metal or glass lobe, no metallic map), with
+no alpha-masked material and no area-light quads (:func:`applies`), needs less:
+:func:`lambert_paths` traces each path to its end in one loop, Embree's
 ``rtcIntersect1``/``rtcOccluded1`` called from the kernel and the path's state in
 registers. Its surfaces may be flat or smooth (interpolated vertex normals) and carry
 base-colour, roughness, normal and emission textures (looked up with the wavefront's ray
 cones); its lights may be emissive triangles, point, spot and sun lights, a constant sky
-or an environment map.
+or an environment map; its bodies may move (physics.md, "Moving objects").
+
+Moving bodies (a :class:`.rest_frames.MovingScene`): every ray carries its origin's lab
+time and is traced over the static BVH and each body's segments in their rest frames
+(:func:`.rest_frames.nearest_one`, shadow rays :func:`.rest_frames.blocked_ray`), and a
+hit on a body is shaded in its rest frame S_u exactly as :func:`.integrator.shade` does
+it: the ray's direction aberrated into S_u and the throughput × D_u⁵, the lanes shifted
+by D_u (with the shift still pending from the last body: one logarithm); lights sampled
+in the lab from the hit's lab event (their spectrum at D_out λ, × D_out⁵, the pdf ×
+D_out²), a light of the same body in its rest frame, another body's light not at all;
+the continuation turned back into the lab (× D_out⁵, its pdf / D_out²), its lanes' shift
+pending until the next hit, its rest-frame form kept for the body it leaves. A moving
+light seen from a static vertex is sampled in its rest frame from the vertex's event
+there. The map's lane lookups are made again whenever the lanes shift.
 
 The estimator is the wavefront integrator's, sample for sample, in the lab frame
 (accelerator coordinates; the camera stage has already aberrated the rays and shifted
@@ -28,7 +41,8 @@ towards the ray:
   w = p_bsdf² / (p_bsdf² + p_light²), p_light = p_sel t² / (A |cos θ_y|), except for the
   camera ray (w = 1);
 - a ray that escapes sees the sky (w against p_light = p_sel / 4π) or the map (w against
-  p_sel · pdf(ω); the camera ray: w = 1 and the bilinear lookup), :func:`miss_radiance`;
+  p_sel · pdf(ω); the camera ray: w = 1 and the bilinear lookup), :func:`sky_radiance`,
+  :func:`env_radiance`;
 - next-event estimation: a light picked by the light CDF (its number reused on the
   light), sampled by :func:`.lights.sample_light` or, for the map,
   :func:`.environment.env_light_sample`; contribution thr ρ/π cos θ_i · w · scale /
