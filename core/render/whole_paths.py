@@ -267,7 +267,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 sh = (0.0, 0.0, 0.0)
                 sb, sig, sgam, scg = 0.0, 1.0, 1.0, 0.5
                 pl = (0.0, 0.0, 0.0)  # the hit's lab point
-                if moving:
+                if with_moving and moving:  # (the guard prunes the block from static kernels)
                     sh = (seg_f[sg, rf.H], seg_f[sg, rf.H + 1], seg_f[sg, rf.H + 2])
                     sb, sig = seg_f[sg, rf.B], seg_f[sg, rf.IG]
                     sgam, scg = seg_f[sg, rf.G], seg_f[sg, rf.C]
@@ -377,10 +377,10 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                         # the others in the lab, from its lab point; a moving light from a
                         # static vertex in its rest frame, from the vertex's event there
                         x, eps_x = p, eps
-                        if moving and not same_body:
+                        if with_moving and moving and not same_body:
                             x = pl
                             eps_x = ray_offset_at(eps_base, pl[0], pl[1], pl[2])
-                        elif light_moves and not same_body:
+                        elif with_moving and light_moves and not same_body:
                             x = to_rest(p, t_ev, (seg_f[ls, rf.H], seg_f[ls, rf.H + 1],
                                                   seg_f[ls, rf.H + 2]), seg_f[ls, rf.B],
                                         seg_f[ls, rf.G], seg_f[ls, rf.C], seg_f[ls, rf.T_REF],
@@ -395,16 +395,18 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                     wn = wi  # the light's direction in the vertex's frame
                     d_l = 1.0  # the Doppler factor the light's spectrum is looked up with
                     r_l = 0.0  # a moving light's lab distance
-                    if moving and not same_body:  # seen in S_u: w_u, D_out = γ_u (1 + u·w),
-                        # pdf × D_out²; a light of another moving body is not sampled
+                    if with_moving and moving and not same_body:
+                        # seen in S_u: w_u, D_out = γ_u (1 + u·w), pdf × D_out²; a light of
+                        # another moving body is not sampled
                         wux, wuy, wuz, inv_dout = aberrate_doppler_ray(
                             wi[0], wi[1], wi[2], -sh[0], -sh[1], -sh[2], sb, sig)
                         d_l = 1.0 / inv_dout
                         wn = (wux, wuy, wuz)
                         p_l = p_l * d_l * d_l
                         ok = ok and not light_moves
-                    elif light_moves and not same_body:  # into the lab: the direction,
-                        # D_e = ν_lab/ν_rest, the pdf p_r D_e², the distance r D_e
+                    elif with_moving and light_moves and not same_body:
+                        # into the lab: the direction, D_e = ν_lab/ν_rest, the pdf p_r D_e²,
+                        # the distance r D_e
                         wlx, wly, wlz, d_x = aberrate_doppler_ray(
                             wi[0], wi[1], wi[2], seg_f[ls, rf.H], seg_f[ls, rf.H + 1],
                             seg_f[ls, rf.H + 2], seg_f[ls, rf.B], seg_f[ls, rf.IG])
@@ -423,15 +425,15 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                         if shifted and beam:  # the spectrum × D_l⁵
                             c *= d_l * d_l * d_l * d_l * d_l
                         t_sh = t_ev
-                        if same_body:  # rest frame to rest frame, as the lab ray
+                        if with_moving and same_body:  # rest frame to rest frame, as the lab ray
                             so, sd, st, dt_o = body_shadow_ray(p, pl, g, eps, target, sh, sb, sig,
                                                                sgam, scg)
                             t_sh = t_ev + dt_o
-                        elif moving:  # the offset origin as a lab event
+                        elif with_moving and moving:  # the offset origin as a lab event
                             so, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
                             so, sd, st = shadow_ray_from(so, target, wi, finite)
                             t_sh = t_ev + dt_o
-                        elif light_moves:  # towards the light's emission event, r_l away
+                        elif with_moving and light_moves:  # towards its emission event, r_l away
                             so, sd, st = shadow_ray(p, g, eps, (p[0] + wi[0] * r_l,
                                                                 p[1] + wi[1] * r_l,
                                                                 p[2] + wi[2] * r_l), wi, True)
@@ -453,7 +455,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                                                 fd[1], fd[2], np.float32(st))
                         if not blocked:
                             if with_env and is_env:
-                                if shifted:  # from a moving vertex: the lanes at D_out λ
+                                if with_moving and shifted:  # a moving vertex: lanes at D_out λ
                                     lam4s, base4s = env_lanes_at(
                                         emit, env_row, lam,
                                         math.log(d_l) * INV_DLOG if shift else 0.0, rgb, nlanes)
@@ -464,7 +466,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                                                       lam4, base4)
                                 for j in range(nlanes):
                                     L[i, j] += thr[j] * rho[j] * c * v4[j]
-                            elif shifted:  # the light's spectrum at D_l λ
+                            elif with_moving and shifted:  # the light's spectrum at D_l λ
                                 lshift = math.log(d_l) * INV_DLOG if shift else 0.0
                                 for j in range(nlanes):
                                     L[i, j] += thr[j] * rho[j] * c * lerp_at(
@@ -488,8 +490,9 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                     thr[j] *= rho[j]
                 d_out = 1.0
                 wr = (wx, wy, wz)  # a moving body's: in its rest frame
-                if moving:  # back into the lab: the direction, D_out⁵, the pdf per lab
-                    # solid angle; the lanes' shift waits for the next hit
+                if with_moving and moving:
+                    # back into the lab: the direction, D_out⁵, the pdf per lab solid angle;
+                    # the lanes' shift waits for the next hit
                     wx, wy, wz, d_out = aberrate_doppler_ray(wx, wy, wz, sh[0], sh[1], sh[2],
                                                              sb, sig)
                     k5, _ = frame_change(d_out, False, beam)
@@ -509,7 +512,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 if with_tex:  # the cone goes on from this hit, widened by the bounce
                     cone0 = cone_w
                     cone1 = bounce_spread(cone1, a, False)
-                if moving:  # the next origin as a lab event, and the same ray in S_u
+                if with_moving and moving:  # the next origin as a lab event, the same ray in S_u
                     on, dt_o = lab_offset(pl, g, eps, 1.0, sh, sb, sgam, scg)
                     rt = t_ev + dt_o
                     o_rest = offset_point(p, g, eps, 1.0)
