@@ -1580,7 +1580,7 @@ def _section_path_floor(add, d) -> None:
         "its state in registers). On the same camera rays, keys and hero lanes, one thread, "
         f"thread CPU ns per path, the fastest of {r0['reps']:.0f} alternated runs: the "
         "wavefront integrator (`integrator.trace`, which the renderer runs where whole "
-        "paths do not apply: moving bodies, glossy or glass lobes, alpha masks, area-light "
+        "paths do not apply: glossy or glass lobes, alpha masks, area-light "
         "quads, denoising features), the whole-path kernel, Embree alone on the "
         "whole-path kernel's own rays (recorded, then traced again in the same order), and "
         "the random numbers alone that "
@@ -1895,7 +1895,12 @@ def _section_recommendations(add, d) -> None:
         "structure-of-arrays lanes, the random numbers and the shading computed for all "
         "8 at once, Embree's `rtcIntersect8`/`rtcOccluded8` for their rays, lanes that "
         "finish refilled from the queue: what Mitsuba's LLVM variant does, written out by "
-        "hand because numba does not vectorise a loop that calls Embree.")
+        "hand because numba does not vectorise a loop that calls Embree. The gain would "
+        "come from the shading, not from Embree: on incoherent rays its packet queries "
+        "barely pay (262 144 random rays inside the box, thread CPU ns per ray, best of 5, "
+        "2026-11-26 21:50, AVX-512, with other work on the second core: Cornell "
+        "`rtcIntersect1` 90.9, `rtcIntersect8` 77.4, `rtcIntersect16` 76.8; heavy 170.9, "
+        "172.4, 167.2; a /tmp experiment).")
     add("2. **The environment map's lookups** (the environment-lit scene, 0.47 of "
         "`scalar_spectral`'s equal-error time at the high level, goal 0.4): perf on the "
         "whole-path kernel shows its time outside Embree in the map's texel loads (cache "
@@ -1911,8 +1916,8 @@ def _section_recommendations(add, d) -> None:
         "more of them where bodies are small, and a shadow ray from a moving vertex could "
         "use its rest-frame form for its own body (one boost less).")
     add("4. **Whole paths for glossy and glass materials**: the principled material's "
-        "other lobes as branches of the whole-path kernel (the wavefront stays for moving "
-        "bodies, alpha masks, area-light quads and the denoising features).")
+        "other lobes as branches of the whole-path kernel (the wavefront stays for alpha "
+        "masks, area-light quads and the denoising features).")
     add("5. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
         f"`Film.add_samples`, {_ns(d, 'film:'):.0f} ns per path): one pass, no (N, 3) "
         "array.")

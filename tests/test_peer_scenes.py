@@ -265,14 +265,14 @@ def test_unknown_scene(tmp_path):
 
 def test_moving_scene_moves_its_bodies_for_relray_and_exports_them_at_rest(tmp_path):
     """The moving scene: the Cornell box's walls and blocks as MOVING_GROUPS bodies at
-    β = 1e-4 (relray takes the wavefront, each body in its rest frame); the peers get the
+    β = 1e-4 (relray takes whole paths, each body in its rest frame); the peers get the
     same triangles at rest (t = 0: rest-frame coordinates are the lab's)."""
     bench = ps.scene_bench("moving", tmp_path, 16, 16)
     scene = bench.scene
     groups = np.asarray(scene.tri_group)
     assert len(set(groups[groups > 0].tolist())) == ps.MOVING_GROUPS
     fr = bench.renderer(threads=1)
-    assert isinstance(fr.prep.tracer, MovingScene) and not fr.whole_paths
+    assert isinstance(fr.prep.tracer, MovingScene) and fr.whole_paths
     d = _mitsuba(bench, 16, 16, tmp_path / "m")
     total = sum(len(faces) for *_, faces in _material_shapes(d, scene, tmp_path / "m"))
     assert total == len(scene.triangles)
