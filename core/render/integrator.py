@@ -546,6 +546,46 @@ def frame_change(D, shift, beam):
     return (D * D * D * D * D if beam else 1.0), (math.log(D) * INV_DLOG if shift else 0.0)
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def segment_frame(seg, s):
+    """Row ``s`` of the segment table ``seg`` (``KernelScene.seg_f``) as the frame of its
+    body: (u's unit direction h, |u|, 1/γ, γ, γ²/(γ+1))."""
+    return ((seg[s, rf.H], seg[s, rf.H + 1], seg[s, rf.H + 2]), seg[s, rf.B], seg[s, rf.IG],
+            seg[s, rf.G], seg[s, rf.C])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def enter_frame(dx, dy, dz, h, b, ig, pend, shift, beam):
+    """A lab ray (unit d) hits a body of velocity u = b h (1/γ = ``ig``): its direction in
+    S_u (float32), the throughput factor D_u⁵ (``beam``) and the lanes' shift into S_u
+    together with the one still pending from the last body, ln(D_u · ``pend``)·INV_DLOG
+    (``shift``; one logarithm for both, :func:`pending_shift`)."""
+    rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -h[0], -h[1], -h[2], b, ig)
+    k5, _ = frame_change(d_u, False, beam)
+    _, cols = frame_change(d_u * pend, shift, False)
+    return np.float32(rx), np.float32(ry), np.float32(rz), k5, cols
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def leave_frame(w, h, b, ig, beam):
+    """A continuation w sampled in a moving body's rest frame S_u (u = b h, 1/γ = ``ig``),
+    turned back into the lab: (its lab direction, D_out = γ (1 + u·w), the throughput
+    factor D_out⁵ when ``beam``)."""
+    wlx, wly, wlz, d_out = aberrate_doppler_ray(w[0], w[1], w[2], h[0], h[1], h[2], b, ig)
+    k5, _ = frame_change(d_out, False, beam)
+    return (wlx, wly, wlz), d_out, k5
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def rest_point(seg, s, p, t):
+    """The lab event (t, p) in the rest frame of segment ``s`` of ``seg``, as a point of its
+    group's BVH coordinates (:func:`to_rest`)."""
+    return to_rest(p, t, (seg[s, rf.H], seg[s, rf.H + 1], seg[s, rf.H + 2]), seg[s, rf.B],
+                   seg[s, rf.G], seg[s, rf.C], seg[s, rf.T_REF],
+                   (seg[s, rf.Q], seg[s, rf.Q + 1], seg[s, rf.Q + 2]),
+                   (seg[s, rf.CEN], seg[s, rf.CEN + 1], seg[s, rf.CEN + 2]))
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def pending_shift(lamu, pend):
     """A lane's lab table coordinate when its path left a moving body with D_out =
@@ -734,9 +774,7 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         d_out = 1.0
         pl = (o[i, 0], o[i, 1], o[i, 2])
         if moving:
-            sh = (s_seg[sg, rf.H], s_seg[sg, rf.H + 1], s_seg[sg, rf.H + 2])
-            sb = s_seg[sg, rf.B]
-            sig, sgam, scg = s_seg[sg, rf.IG], s_seg[sg, rf.G], s_seg[sg, rf.C]
+            sh, sb, sig, sgam, scg = segment_frame(s_seg, sg)
             pl = (o[i, 0] + t_hit[i] * dx, o[i, 1] + t_hit[i] * dy, o[i, 2] + t_hit[i] * dz)
             if r_seg[i] == sg:
                 # back on a body of the segment the ray left: its rest-frame direction is
@@ -750,13 +788,10 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                         thr[pi, j] *= k5
                 pend[pi] = 1.0
             else:
-                rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1], -sh[2], sb,
-                                                       sig)
-                dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
-                k5, _ = frame_change(d_u, False, s_beam)
                 # the lanes' shift into S_u with the one still pending from the last body:
                 # one logarithm for both (pending_shift)
-                _, cols = frame_change(d_u * pend[pi], s_shift, False)
+                dx, dy, dz, k5, cols = enter_frame(dx, dy, dz, sh, sb, sig, pend[pi], s_shift,
+                                                   s_beam)
                 pend[pi] = 1.0
                 # (this loop and the one where the path leaves the body stay in shade: a
                 # device function looping over the path arrays would cost reference counts)
@@ -916,14 +951,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                                                p_l * d_out * d_out, scale, delta, ok and ls < 0,
                                                wd, wm, a2)
             elif ls >= 0:  # a moving triangle light, sampled in its rest frame
-                lh = (s_seg[ls, rf.H], s_seg[ls, rf.H + 1], s_seg[ls, rf.H + 2])
-                lb = s_seg[ls, rf.B]
-                lig = s_seg[ls, rf.IG]
-                xr = to_rest(p, t_ev, lh, lb, s_seg[ls, rf.G], s_seg[ls, rf.C],
-                             s_seg[ls, rf.T_REF],
-                             (s_seg[ls, rf.Q], s_seg[ls, rf.Q + 1], s_seg[ls, rf.Q + 2]),
-                             (s_seg[ls, rf.CEN], s_seg[ls, rf.CEN + 1],
-                              s_seg[ls, rf.CEN + 2]))
+                lh, lb, lig, _, _ = segment_frame(s_seg, ls)
+                xr = rest_point(s_seg, ls, p, t_ev)
                 wr, p_r, scale, delta, finite, target, ok = sample_light(
                     light, p_sel, rescale_uniform(u_a, cdf_k, p_sel), u2, xr[0], xr[1], xr[2],
                     eps)
@@ -1039,16 +1068,14 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
         prev_delta[pi] = 1 if delta else 0
         prev_moving[pi] = 1 if moving else 0
         if moving:  # back into the lab: wi and D_out; the pdf per lab solid angle
-            wlx, wly, wlz, d_out = aberrate_doppler_ray(wi[0], wi[1], wi[2], sh[0], sh[1],
-                                                        sh[2], sb, sig)
-            k5, _ = frame_change(d_out, False, s_beam)
+            wl, d_out, k5 = leave_frame(wi, sh, sb, sig, s_beam)
             for j in range(nlanes):
                 thr[pi, j] *= k5
             if s_shift:  # the lanes' shift waits for the next hit (pending_shift)
                 pend[pi] = d_out
             e_row[pi] = -1
             prev_pdf[pi] = pdf / (d_out * d_out)
-            wi = (wlx, wly, wlz)
+            wi = wl
         # ---- Russian roulette
         if depth + 1 >= RR_DEPTH:
             q = 0.0

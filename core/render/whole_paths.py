@@ -71,7 +71,6 @@ from ..physics.relativity import aberrate_doppler_ray
 from ..physics.spectrum import INV_DLOG
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
-from . import rest_frames as rf
 from .accel import MISS_DISTANCE, Accel
 from .embree import intersect1, occluded1, rayhit_buffer
 from .environment import (
@@ -88,17 +87,20 @@ from .integrator import (
     KernelScene,
     body_shadow_ray,
     column,
+    enter_frame,
     face_forward,
     frame_change,
     lab_offset,
+    leave_frame,
     lerp,
     lerp_at,
     offset_point,
+    rest_point,
+    segment_frame,
     shading_normal,
     shadow_ray,
     shadow_ray_from,
     surface_point,
-    to_rest,
     vertex_normal,
     wavefront_buffers,
 )
@@ -268,9 +270,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 sb, sig, sgam, scg = 0.0, 1.0, 1.0, 0.5
                 pl = (0.0, 0.0, 0.0)  # the hit's lab point
                 if with_moving and moving:  # (the guard prunes the block from static kernels)
-                    sh = (seg_f[sg, rf.H], seg_f[sg, rf.H + 1], seg_f[sg, rf.H + 2])
-                    sb, sig = seg_f[sg, rf.B], seg_f[sg, rf.IG]
-                    sgam, scg = seg_f[sg, rf.G], seg_f[sg, rf.C]
+                    sh, sb, sig, sgam, scg = segment_frame(seg_f, sg)
                     pl = (np.float64(ox + t * dx), np.float64(oy + t * dy),
                           np.float64(oz + t * dz))
                     if r_seg == sg:  # back on the body it left: its rest-frame direction,
@@ -281,12 +281,9 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                             for j in range(nlanes):
                                 thr[j] *= k5
                     else:
-                        rx, ry, rz, d_u = aberrate_doppler_ray(dx, dy, dz, -sh[0], -sh[1],
-                                                               -sh[2], sb, sig)
-                        dx, dy, dz = np.float32(rx), np.float32(ry), np.float32(rz)
-                        k5, _ = frame_change(d_u, False, beam)
                         # the shift into S_u with the one pending from the last body
-                        _, cols = frame_change(d_u * pend, shift, False)
+                        dx, dy, dz, k5, cols = enter_frame(dx, dy, dz, sh, sb, sig, pend, shift,
+                                                           beam)
                         for j in range(nlanes):
                             thr[j] *= k5
                             lam[0, j] += cols
@@ -381,13 +378,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                             x = pl
                             eps_x = ray_offset_at(eps_base, pl[0], pl[1], pl[2])
                         elif with_moving and light_moves and not same_body:
-                            x = to_rest(p, t_ev, (seg_f[ls, rf.H], seg_f[ls, rf.H + 1],
-                                                  seg_f[ls, rf.H + 2]), seg_f[ls, rf.B],
-                                        seg_f[ls, rf.G], seg_f[ls, rf.C], seg_f[ls, rf.T_REF],
-                                        (seg_f[ls, rf.Q], seg_f[ls, rf.Q + 1],
-                                         seg_f[ls, rf.Q + 2]),
-                                        (seg_f[ls, rf.CEN], seg_f[ls, rf.CEN + 1],
-                                         seg_f[ls, rf.CEN + 2]))
+                            x = rest_point(seg_f, ls, p, t_ev)
                         wi, p_l, scale, delta, finite, target, ok = lightmod.sample_light(
                             lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot,
                                                   v0, e1, e2, ng, area, tri_mat, one_sided),
@@ -407,9 +398,9 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                     elif with_moving and light_moves and not same_body:
                         # into the lab: the direction, D_e = ν_lab/ν_rest, the pdf p_r D_e²,
                         # the distance r D_e
-                        wlx, wly, wlz, d_x = aberrate_doppler_ray(
-                            wi[0], wi[1], wi[2], seg_f[ls, rf.H], seg_f[ls, rf.H + 1],
-                            seg_f[ls, rf.H + 2], seg_f[ls, rf.B], seg_f[ls, rf.IG])
+                        lh, lb, lig, _, _ = segment_frame(seg_f, ls)
+                        wlx, wly, wlz, d_x = aberrate_doppler_ray(wi[0], wi[1], wi[2], lh[0],
+                                                                  lh[1], lh[2], lb, lig)
                         d_l = 1.0 / d_x
                         rx, ry, rz = target[0] - x[0], target[1] - x[1], target[2] - x[2]
                         r_l = math.sqrt(rx * rx + ry * ry + rz * rz) * d_l
@@ -493,9 +484,8 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 if with_moving and moving:
                     # back into the lab: the direction, D_out⁵, the pdf per lab solid angle;
                     # the lanes' shift waits for the next hit
-                    wx, wy, wz, d_out = aberrate_doppler_ray(wx, wy, wz, sh[0], sh[1], sh[2],
-                                                             sb, sig)
-                    k5, _ = frame_change(d_out, False, beam)
+                    wl, d_out, k5 = leave_frame(wr, sh, sb, sig, beam)
+                    wx, wy, wz = wl
                     for j in range(nlanes):
                         thr[j] *= k5
                     if shift:
