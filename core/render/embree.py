@@ -149,6 +149,34 @@ _rtc_intersect1 = types.ExternalFunction(
 _rtc_occluded1 = types.ExternalFunction(
     "rtcOccluded1", types.void(types.uint64, types.uint64, types.uint64))
 
+# the packet queries (a ``const int* valid`` first: -1 traces the lane, 0 leaves it)
+_rtc_intersect16 = types.ExternalFunction(
+    "rtcIntersect16", types.void(types.uint64, types.uint64, types.uint64, types.uint64))
+_rtc_occluded16 = types.ExternalFunction(
+    "rtcOccluded16", types.void(types.uint64, types.uint64, types.uint64, types.uint64))
+#: lanes of a packet (``RTCRayHit16``); word w of lane l is word ``w * PACKET + l``
+PACKET = 16
+#: 32-bit words per lane of an ``RTCRayHit16`` (the ray's 12, the hit's Ng, u, v, primID,
+#: geomID, instID and instPrimID; room to spare)
+PACKET_WORDS = 24
+TFAR, PRIM, GEOM, HIT_U, HIT_V = _TFAR, _PRIM, _GEOM, _HIT_U, _HIT_V
+
+
+@njit(cache=True, nogil=True, inline="always")
+def intersect16(scene, valid, packet):  # pragma: no cover - compiled
+    """``rtcIntersect16`` of the lanes whose ``valid`` word is -1 (int32 (16,)) through the
+    ``RTCRayHit16`` ``packet`` (uint32 (16 · PACKET_WORDS,); both aligned to 64 bytes):
+    the nearest hit's tfar, u, v, primID and geomID in the lanes' words (geomID
+    ``RTC_INVALID_GEOMETRY_ID``: a miss)."""
+    _rtc_intersect16(valid.ctypes.data, scene, packet.ctypes.data, 0)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def occluded16(scene, valid, packet):  # pragma: no cover - compiled
+    """``rtcOccluded16`` of the lanes whose ``valid`` word is -1: a blocked lane's tfar
+    becomes -inf."""
+    _rtc_occluded16(valid.ctypes.data, scene, packet.ctypes.data, 0)
+
 
 @njit(cache=True, nogil=True, inline="always")
 def rayhit_buffer():  # pragma: no cover - compiled
