@@ -32,7 +32,7 @@ from ..scene.description import Job, RenderSettings
 from ..scene.geometry import Scene, build_scene
 from ..scene.motion import resolve_camera
 from ..scene.spectral_model import resolved_job
-from . import environment, whole_paths
+from . import environment, lane_paths, whole_paths
 from .accel import MISS_DISTANCE, Accel, max_distance
 from .camera import PinholeCamera
 from .film import Film, clamp_samples
@@ -269,6 +269,11 @@ class FrameRenderer:
         # a scene of Lambert surfaces (no alpha masks, no area-light quads), moving or not:
         # whole paths in one kernel call (whole_paths.py), else the wavefront integrator
         self.whole_paths = whole_paths.applies(self.kernel, prep.tracer, self.features)
+        # ... and of those, a static one lit by emissive triangles alone, without a map,
+        # sky, textures or vertex normals: sixteen paths at a time in SIMD lanes
+        # (lane_paths.py; either flag False turns to the next integrator)
+        self.lane_paths = self.whole_paths and lane_paths.applies(self.kernel, prep.tracer,
+                                                                   self.features)
         self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
 
     def render(self, event: relativity.ShutterEvent, frame: int,
@@ -408,7 +413,11 @@ class FrameRenderer:
         if self.kernel.tex.enabled:  # the ray cones' start (textures.py)
             spread = lab_spread(pixel_spread(self.camera.tan_half_fov, self.camera.height), D)
         feats = None
-        if self.whole_paths:
+        if self.whole_paths and self.lane_paths:
+            L, t_hit, seg = lane_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
+                                             o_local, d_lab, lamu, nlanes,
+                                             buffers=keep.setdefault("whole", {}))
+        elif self.whole_paths:
             L, t_hit, seg = whole_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
                                               o_local, d_lab, lamu, nlanes,
                                               sky_seen=not s.transparent,

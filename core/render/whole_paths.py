@@ -596,7 +596,8 @@ def env_radiance(L, i, thr, lam4, base4, nlanes, depth, prev_pdf, sky_pmf, env_t
         L[i, j] += thr[j] * wt * v4[j]
 
 
-_BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int32))
+#: the arrays :func:`trace` returns, kept between calls (:func:`.integrator.wavefront_buffers`)
+BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int32))
 #: the ``spread`` of an untextured scene (its kernel never reads it)
 _NO_SPREAD = np.zeros(1, np.float32)
 #: the ``first_seg`` of a static scene (its kernel never writes it)
@@ -684,7 +685,7 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     lab spread angles ((N,) or one for all), the ray cones' start for the textures' level
     of detail."""
     n = len(keys)
-    b = wavefront_buffers(n, buffers, _BUFFERS)
+    b = wavefront_buffers(n, buffers, BUFFERS)
     b["seg"][:] = -1
     spread = (np.ascontiguousarray(np.broadcast_to(np.asarray(spread, np.float32), (n,)))
               if sc.tex.enabled else _NO_SPREAD)

@@ -1,0 +1,444 @@
+"""Paths in SIMD lanes: sixteen Lambert paths traced side by side (issue 12: cost per path).
+
+:mod:`.whole_paths` traces one path at a time, so its shading is scalar code and every
+ray an ``rtcIntersect1``/``rtcOccluded1``. Here sixteen paths share one loop: each lane
+holds a path's state (structure of arrays, one row per quantity, one column per lane),
+every bounce of the sixteen is one ``rtcIntersect16`` packet, their shading one loop over
+the lanes that LLVM compiles to vector code (branch-free: a lane's decisions are
+selects and masks), their shadow rays one ``rtcOccluded16`` packet; a lane whose path has
+ended takes the next camera ray from the queue before the next packet. This is what
+Mitsuba 3's LLVM variant does with its JIT-compiled kernels, written out for the
+scenes where it pays most (:func:`applies`): static, Lambert, lit by emissive triangles,
+flat-shaded, without textures, environment map or sky.
+
+The estimator is :func:`.whole_paths.lambert_paths`', sample for sample (the same random
+numbers, light selection, offsets and table lookups; that module's docstring): at a hit
+the emission of a front face (or a two-sided emitter) times the throughput, with the
+power heuristic against next-event estimation except for the camera ray; next-event
+estimation towards an emissive triangle picked by the light CDF
+(:func:`.lights.sample_triangle`; contribution thr ρ/π cos θ_i w L_e / p_light,
+w = p_light² / (p_light² + p_bsdf²)); the continuation cosine-weighted about the
+geometric normal, throughput × ρ(λ); Russian roulette from ``integrator.RR_DEPTH`` on the
+lanes' largest throughput. ``tests/test_lane_paths.py`` checks path by path that the two
+kernels give the same radiance; ``bench/path_floor.py`` measures them against Embree's
+own cost.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
+from numba.np.arrayobj import make_array, populate_array
+
+from ..scene.geometry import RAY_OFFSET_POINT
+from . import lights as lightmod
+from . import whole_paths
+from .accel import MISS_DISTANCE, Accel
+from .embree import (
+    GEOM,
+    HIT_U,
+    HIT_V,
+    PACKET,
+    PACKET_WORDS,
+    PRIM,
+    TFAR,
+    intersect16,
+    occluded16,
+)
+from .integrator import FAST_MATH, RR_DEPTH, KernelScene, column, lerp, wavefront_buffers
+from .sampling import (
+    DIM_BSDF,
+    DIM_LIGHT,
+    DIM_ROULETTE,
+    bounce_dim,
+    cosine_hemisphere,
+    onb,
+    power_heuristic,
+    rand,
+    rescale_uniform,
+    sobol2,
+    to_world,
+)
+
+_INV_PI = 1.0 / math.pi
+_INVALID = np.uint32(0xFFFFFFFF)
+#: the words of a shadow ray's origin, direction and length in an RTCRay16
+_SHADOW_WORDS = (0, 1, 2, 4, 5, 6, TFAR)
+W = PACKET
+"""Lanes: the paths traced side by side (Embree's widest packet; :func:`lane_paths`'
+stack arrays are sized for 16, its packets for 16 lanes of PACKET_WORDS words)."""
+assert W == 16 and PACKET_WORDS * W == 384
+
+
+def applies(sc: KernelScene, accel: object, features: bool) -> bool:
+    """Whether :func:`lane_paths` can trace the scene ``sc``: one where
+    :func:`.whole_paths.applies` (Lambert, no alpha mask, no area-light quad, no
+    denoising features) whose BVH is static, with no environment map, constant sky,
+    image texture or vertex normals, lit by emissive triangles only."""
+    kinds = np.asarray(sc.l_kind)
+    return (isinstance(accel, Accel) and whole_paths.applies(sc, accel, features)
+            and not sc.env_on and not sc.tex.enabled and not bool(sc.has_vn)
+            and int(sc.sky_row) < 0 and len(kinds) > 0
+            and bool(np.all(kinds == lightmod.TRIANGLE)))
+
+
+_LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
+"""The lane loops' compile options: inlined into :func:`lane_paths`, where the lanes'
+arrays are its own stack memory (:func:`_stack`), so LLVM knows that nothing the
+loops read from the scene's arrays is written by them and vectorises each loop over
+the lanes."""
+
+
+@intrinsic(prefer_literal=True)
+def _stack(typingctx, rows, cols, dtype):  # pragma: no cover - compiled
+    """A C-contiguous (rows, cols) array of ``dtype`` (rows and cols literals) in fresh
+    stack memory of the calling function, aligned to 64 bytes and uninitialised; it has
+    no owner to count references to."""
+    if not (isinstance(rows, types.IntegerLiteral) and isinstance(cols, types.IntegerLiteral)):
+        return None
+    shape = (rows.literal_value, cols.literal_value)
+    elem = dtype.instance_type if isinstance(dtype, types.NumberClass) else dtype.dtype
+    aryty = types.Array(elem, 2, "C")
+
+    def codegen(context, builder, signature, args):
+        lty = context.get_data_type(elem)
+        with builder.goto_entry_block():
+            slot = builder.alloca(ir.ArrayType(lty, shape[0] * shape[1]))
+            slot.align = 64
+        ary = make_array(aryty)(context, builder)
+        size = context.get_abi_sizeof(lty)
+        intp = context.get_value_type(types.intp)
+        populate_array(ary, data=builder.bitcast(slot, lty.as_pointer()),
+                       shape=[intp(n) for n in shape],
+                       strides=[intp(shape[1] * size), intp(size)], itemsize=intp(size),
+                       meminfo=None)
+        return ary._getvalue()
+
+    return aryty(rows, cols, dtype), codegen
+
+
+@njit(**_LANES)
+def fill_packet(ray, path, hit, hitf, valid):  # pragma: no cover - compiled
+    """The ``RTCRayHit16`` of the lanes' rays (``ray``: origin, direction rows), tnear 0,
+    tfar 1e30, no hit yet; a lane without a path left out (valid 0)."""
+    for lane in range(valid.shape[0]):
+        for c in range(3):
+            hitf[c * W + lane] = ray[c, lane]
+            hitf[(4 + c) * W + lane] = ray[3 + c, lane]
+        hitf[3 * W + lane] = 0.0
+        hitf[7 * W + lane] = 0.0
+        hitf[TFAR * W + lane] = MISS_DISTANCE
+        hit[9 * W + lane] = _INVALID
+        hit[10 * W + lane] = 0
+        hit[11 * W + lane] = 0
+        hit[PRIM * W + lane] = _INVALID
+        hit[GEOM * W + lane] = _INVALID
+        valid[lane] = -1 if path[lane] >= 0 else 0
+
+
+@njit(**_LANES)
+def shade_hits(geo, mats, eps_base, max_depth, hit, hitf, lanes, bounce):  # pragma: no cover
+    """The packet's hits, lane by lane: the point and the geometric normal turned towards
+    the ray (``pt``, ``gn``), the emission of a front face (or a two-sided emitter) times
+    the throughput into ``acc`` (MIS-weighted against NEE, w = p_bsdf² / (p_bsdf² +
+    p_light²), p_light = p_sel t² / (A |cos θ_g|); the camera ray w = 1), ρ(λ) per lane,
+    the offset ε(p), the light's pair of numbers, whether the path goes on (``cont``).
+    ``geo``, ``mats``, ``lanes``, ``bounce``: :func:`lane_paths`' tuples."""
+    v0, e1, e2, ng, area, tri_mat = geo
+    refl, emit, emit_row, one_sided, tri_pmf = mats[:5]
+    path, key, depth, ray, thr, li, lf, acc, prev_pdf = lanes
+    pt, gn, eps, rho, ua, pos, _, cont, _ = bounce
+    for lane in range(eps.shape[0]):
+        h = path[lane] >= 0 and hit[GEOM * W + lane] != _INVALID
+        tri = np.int64(hit[PRIM * W + lane]) if h else 0
+        t = hitf[TFAR * W + lane]
+        b1, b2 = hitf[HIT_U * W + lane], hitf[HIT_V * W + lane]
+        dep = depth[lane]
+        px = v0[tri, 0] + b1 * e1[tri, 0] + b2 * e2[tri, 0]
+        py = v0[tri, 1] + b1 * e1[tri, 1] + b2 * e2[tri, 1]
+        pz = v0[tri, 2] + b1 * e1[tri, 2] + b2 * e2[tri, 2]
+        gx, gy, gz = ng[tri, 0], ng[tri, 1], ng[tri, 2]
+        cos_g = -(gx * np.float64(ray[3, lane]) + gy * np.float64(ray[4, lane])
+                  + gz * np.float64(ray[5, lane]))
+        front = cos_g > 0.0
+        sgn = np.float32(1.0) if front else np.float32(-1.0)
+        gn[0, lane], gn[1, lane], gn[2, lane] = gx * sgn, gy * sgn, gz * sgn
+        pt[0, lane], pt[1, lane], pt[2, lane] = px, py, pz
+        m = tri_mat[tri]
+        er = emit_row[m]
+        lit = h and er >= 0 and (front or one_sided[m] == 0)
+        pm = tri_pmf[tri]
+        wt = 1.0
+        if dep > 0 and pm > 0.0:
+            wt = power_heuristic(prev_pdf[lane], lightmod.triangle_light_pdf(
+                pm, area[tri], t, cos_g))
+        row = er if er >= 0 else 0
+        for j in range(4):
+            e = thr[j, lane] * wt * lerp(emit, row, li[j, lane], lf[j, lane])
+            acc[j, lane] += e if lit else 0.0
+            rho[j, lane] = lerp(refl, m, li[j, lane], lf[j, lane])
+        cont[lane] = h and dep + 1 < max_depth
+        eps[lane] = eps_base + RAY_OFFSET_POINT * max(abs(px), max(abs(py), abs(pz)))
+        ua[0, lane], ua[1, lane] = sobol2(key[lane], bounce_dim(dep, DIM_LIGHT))
+        pos[lane] = 0
+
+
+@njit(**_LANES)
+def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
+    """Each lane's light by the CDF: ``pos`` = #{k: cdf[k] ≤ u} (u = ``ua[0]``), a binary
+    search of the same length in every lane (``lights.select``'s searchsorted)."""
+    n_cdf = l_cdf.shape[0]
+    s = 1
+    while s < n_cdf:
+        s *= 2
+    while s > 0:
+        for lane in range(pos.shape[0]):
+            p = pos[lane] + s
+            pos[lane] = p if p <= n_cdf and l_cdf[min(p, n_cdf) - 1] <= ua[0, lane] \
+                else pos[lane]
+        s //= 2
+
+
+@njit(**_LANES)
+def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes,
+                 bounce):  # pragma: no cover - compiled
+    """Each lane's next-event estimation towards its light (the shadow ray into the
+    ``RTCRay16`` ``shadow``, valid where the sample counts; its contribution thr ρ/π
+    cos θ_i w L_e / p_light into ``nee``), then its continuation, cosine-weighted about
+    g (the next ray, throughput × ρ, the roulette from ``RR_DEPTH`` on the largest lane:
+    ``alive`` whether the path goes on)."""
+    v0, e1, e2, ng, area, tri_mat = geo
+    _, emit, _, one_sided, _, l_prim, l_row, l_scale, l_cdf = mats
+    _, key, depth, ray, thr, li, lf, _, prev_pdf = lanes
+    pt, gn, eps, rho, ua, pos, nee, cont, alive = bounce
+    n_cdf = l_cdf.shape[0]
+    lane4 = 1.0 if nlanes == 4 else 0.0
+    for lane in range(eps.shape[0]):
+        dep = depth[lane]
+        k = min(max(pos[lane] - 1, 0), n_cdf - 2)
+        lo = l_cdf[k]
+        p_sel = l_cdf[k + 1] - lo
+        u1 = rescale_uniform(ua[0, lane], lo, p_sel)
+        lt = l_prim[k]
+        px, py, pz = pt[0, lane], pt[1, lane], pt[2, lane]
+        gx, gy, gz = gn[0, lane], gn[1, lane], gn[2, lane]
+        ep = eps[lane]
+        (wx, wy, wz), p_l, target, ok = lightmod.sample_triangle(
+            (v0[lt, 0], v0[lt, 1], v0[lt, 2]), (e1[lt, 0], e1[lt, 1], e1[lt, 2]),
+            (e2[lt, 0], e2[lt, 1], e2[lt, 2]), (ng[lt, 0], ng[lt, 1], ng[lt, 2]), area[lt],
+            one_sided[tri_mat[lt]], p_sel, u1, ua[1, lane], px, py, pz, ep)
+        scale = l_scale[k]
+        cos_i = wx * gx + wy * gy + wz * gz
+        go = cont[lane] and ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0
+        c = power_heuristic(p_l, cos_i * _INV_PI) * cos_i * scale / p_l * _INV_PI
+        ox, oy, oz = px + gx * ep, py + gy * ep, pz + gz * ep
+        sx, sy, sz = target[0] - ox, target[1] - oy, target[2] - oz
+        sl = math.sqrt(sx * sx + sy * sy + sz * sz)
+        shadowf[lane] = np.float32(ox)
+        shadowf[W + lane] = np.float32(oy)
+        shadowf[2 * W + lane] = np.float32(oz)
+        shadowf[3 * W + lane] = 0.0
+        shadowf[4 * W + lane] = np.float32(sx / sl)
+        shadowf[5 * W + lane] = np.float32(sy / sl)
+        shadowf[6 * W + lane] = np.float32(sz / sl)
+        shadowf[7 * W + lane] = 0.0
+        shadowf[TFAR * W + lane] = np.float32(sl * (1.0 - 1e-4))
+        shadow[9 * W + lane] = _INVALID
+        shadow[10 * W + lane] = 0
+        shadow[11 * W + lane] = 0
+        svalid[lane] = -1 if go else 0
+        lrow = l_row[k]
+        q = 0.0
+        for j in range(4):
+            r = rho[j, lane]
+            nee[j, lane] = thr[j, lane] * r * c * lerp(emit, lrow, li[j, lane], lf[j, lane])
+            thr[j, lane] *= r
+            q = max(q, thr[j, lane] if j < 3 else thr[j, lane] * lane4)
+        b_1, b_2 = sobol2(key[lane], bounce_dim(dep, DIM_BSDF))
+        lx, ly, lz = cosine_hemisphere(b_1, b_2)
+        fx, fy, fz = np.float64(gx), np.float64(gy), np.float64(gz)
+        tb, bb = onb(fx, fy, fz)
+        nx, ny, nz = to_world(lx, ly, lz, tb, bb, fx, fy, fz)
+        pdf = lz * _INV_PI
+        onward = cont[lane] and pdf > 0.0 and nx * gx + ny * gy + nz * gz > 0.0
+        roulette = dep + 1 >= RR_DEPTH and q < 1.0
+        survive = not roulette or rand(key[lane], bounce_dim(dep, DIM_ROULETTE)) < q
+        for j in range(4):
+            thr[j, lane] = thr[j, lane] / q if roulette else thr[j, lane]
+        alive[lane] = onward and survive
+        prev_pdf[lane] = pdf
+        ray[0, lane], ray[1, lane], ray[2, lane] = ox, oy, oz
+        ray[3, lane] = np.float32(nx)
+        ray[4, lane] = np.float32(ny)
+        ray[5, lane] = np.float32(nz)
+        depth[lane] = dep + 1
+
+
+@njit(**_LANES)
+def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
+    """The lanes' next-event contributions whose shadow ray was not blocked (tfar -inf)."""
+    for lane in range(svalid.shape[0]):
+        seen = svalid[lane] != 0 and not shadowf[TFAR * W + lane] < 0.0
+        for j in range(4):
+            acc[j, lane] += nee[j, lane] if seen else 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
+def lane_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, one_sided, l_prim,
+               l_row, l_scale, l_cdf, tri_pmf, eps_base, keys, o, d, lamu, nlanes, max_depth,
+               L, first_t, log):  # pragma: no cover - compiled
+    """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
+    the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
+    coordinates), the outputs and the packet log (:data:`NO_LOG`: none kept). Returns
+    (nearest-hit rays, shadow rays, packets)."""
+    n_paths = keys.shape[0]
+    top = emit.shape[1] - 1
+    # the packets and the lanes' arrays live on the stack (sizes for W = 16: literals)
+    hit = _stack(1, 384, np.uint32)[0]
+    hitf = hit.view(np.float32)
+    shadow = _stack(1, 384, np.uint32)[0]
+    shadowf = shadow.view(np.float32)
+    valid = _stack(1, 16, np.int32)[0]
+    svalid = _stack(1, 16, np.int32)[0]
+    # a lane's path: its index (-1: none), key, bounce, ray, throughput and lanes' table
+    # columns, its radiance so far, the pdf of the ray's direction
+    path = _stack(1, 16, np.int64)[0]
+    key = _stack(1, 16, np.uint64)[0]
+    depth = _stack(1, 16, np.int64)[0]
+    ray = _stack(6, 16, np.float32)
+    thr = _stack(4, 16, np.float64)
+    li = _stack(4, 16, np.int64)
+    lf = _stack(4, 16, np.float64)
+    acc = _stack(4, 16, np.float32)
+    prev_pdf = _stack(1, 16, np.float64)[0]
+    # one bounce's values, between the lane loops
+    pt = _stack(3, 16, np.float32)
+    gn = _stack(3, 16, np.float32)
+    eps = _stack(1, 16, np.float64)[0]
+    rho = _stack(4, 16, np.float64)
+    ua = _stack(2, 16, np.float64)
+    pos = _stack(1, 16, np.int64)[0]
+    nee = _stack(4, 16, np.float64)
+    alive = _stack(1, 16, np.bool_)[0]
+    cont = _stack(1, 16, np.bool_)[0]
+    for lane in range(W):
+        path[lane] = -1
+        alive[lane] = False
+    geo = (v0, e1, e2, ng, area, tri_mat)
+    mats = (refl, emit, emit_row, one_sided, tri_pmf, l_prim, l_row, l_scale, l_cdf)
+    lanes = (path, key, depth, ray, thr, li, lf, acc, prev_pdf)
+    bounce = (pt, gn, eps, rho, ua, pos, nee, cont, alive)
+    log_hit, log_shadow, log_valid = log
+    record = log_hit.shape[0] > 1
+    nxt = 0
+    packets = 0
+    n_rays = 0
+    n_sh = 0
+    while True:
+        # the lanes whose path ended take the next camera rays
+        busy = 0
+        for lane in range(W):
+            if path[lane] < 0 and nxt < n_paths:
+                i = nxt
+                nxt += 1
+                path[lane] = i
+                key[lane] = keys[i]
+                depth[lane] = 0
+                for c in range(3):
+                    ray[c, lane] = o[i, c]
+                    ray[3 + c, lane] = d[i, c]
+                for j in range(4):
+                    li[j, lane], lf[j, lane] = column(lamu[i, j], top)
+                    thr[j, lane] = 1.0
+                    acc[j, lane] = 0.0
+                prev_pdf[lane] = 0.0
+                first_t[i] = MISS_DISTANCE
+            if path[lane] >= 0:
+                busy += 1
+        if busy == 0:
+            break
+        fill_packet(ray, path, hit, hitf, valid)
+        n_rays += busy
+        if record:
+            for c in range(6):
+                for lane in range(W):
+                    log_hit[packets, c, lane] = ray[c, lane]
+        intersect16(handle, valid, hit)
+        shade_hits(geo, mats, eps_base, max_depth, hit, hitf, lanes, bounce)
+        pick_lights(l_cdf, ua, pos)
+        sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce)
+        for lane in range(W):
+            n_sh += svalid[lane] != 0
+        if record:
+            for c in range(7):
+                for lane in range(W):
+                    log_shadow[packets, c, lane] = shadowf[_SHADOW_WORDS[c] * W + lane]
+            for lane in range(W):
+                log_valid[packets, 0, lane] = valid[lane]
+                log_valid[packets, 1, lane] = svalid[lane]
+        packets += 1
+        occluded16(handle, svalid, shadow)
+        add_unblocked(shadowf, svalid, nee, acc)
+        # the paths that ended give their radiance and, from the camera ray, its distance
+        for lane in range(W):
+            i = path[lane]
+            if i < 0:
+                continue
+            if depth[lane] == 1 and hit[GEOM * W + lane] != _INVALID:
+                first_t[i] = hitf[TFAR * W + lane]
+            if not alive[lane]:
+                for j in range(4):
+                    L[i, j] = acc[j, lane] if j < nlanes else 0.0
+                path[lane] = -1
+    return n_rays, n_sh, packets
+
+
+#: no packet log (:func:`lane_paths`' ``log`` when nothing is recorded)
+NO_LOG = (np.zeros((1, 6, W), np.float32), np.zeros((1, 7, W), np.float32),
+          np.zeros((1, 2, W), np.int32))
+
+
+def packet_log(n_paths: int, max_depth: int) -> tuple:
+    """Room to record every packet of ``n_paths`` paths of at most ``max_depth`` rays
+    (benchmarks, :func:`lane_trace`'s ``log``): the nearest-hit packets' rays (origin,
+    direction rows), the shadow packets' (origin, direction, length) and both packets'
+    valid words."""
+    n = n_paths * max_depth + 1
+    return (np.zeros((n, 6, W), np.float32), np.zeros((n, 7, W), np.float32),
+            np.zeros((n, 2, W), np.int32))
+
+
+def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
+               d: np.ndarray, lamu: np.ndarray, nlanes: int, max_depth: int, L: np.ndarray,
+               first_t: np.ndarray, log: tuple | None = None) -> tuple[int, int, int]:
+    """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
+    ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
+    its end through the scene ``sc`` (where :func:`applies`), sixteen at a time: its lab
+    radiance per lane into ``L[i]`` (float32 (N, 4); lanes ≥ nlanes 0) and the camera
+    ray's hit distance into ``first_t[i]`` (1e30: none). ``log`` (benchmarks,
+    :func:`packet_log`): every packet's rays. Returns (nearest-hit rays, shadow rays,
+    packets)."""
+    return lane_paths(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.tri_mat, sc.refl,
+                      sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_prim, sc.l_row,
+                      sc.l_scale, sc.l_cdf, sc.tri_pmf, float(sc.eps), keys, o, d, lamu,
+                      nlanes, max_depth, L, first_t, NO_LOG if log is None else log)
+
+
+def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
+          o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
+          buffers: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`.whole_paths.trace` for a scene where :func:`applies`: (L (N, 4) lab
+    radiance, the camera rays' hit distances (1e30: none), the moving segments they hit
+    (all -1: the scene is static)), the arrays kept in ``buffers`` until its next use
+    (:func:`.integrator.wavefront_buffers`). ``o_local``/``d`` float32 (N, 3) camera rays
+    in accelerator coordinates, ``lamu`` the lanes' table coordinates (N, 4)."""
+    b = wavefront_buffers(len(keys), buffers, whole_paths.BUFFERS)
+    b["seg"][:] = -1
+    lane_trace(sc, accel, keys, np.ascontiguousarray(o_local, np.float32),
+               np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
+               nlanes, max_depth, b["L"], b["first_t"])
+    return b["L"], b["first_t"], b["seg"]

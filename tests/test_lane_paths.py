@@ -1,0 +1,170 @@
+"""core/render/lane_paths.py: sixteen Lambert paths at a time in SIMD lanes, for static
+scenes lit by emissive triangles alone.
+
+Its estimator is whole_paths.py's (and the wavefront integrator's), with the same random
+numbers, so the three must give the same radiance path by path (to float32 rounding: a
+rounding difference may flip a roulette decision now and then, hence a small allowance
+of differing paths), the same camera-ray hit distances and the same numbers of rays;
+and the renderer must take it exactly where it applies.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_whole_paths import (
+    _delta_lights,
+    _sky,
+    _textures,
+    camera_paths,
+    cornell,
+    environment_scene,
+    renderer,
+    scene_data,
+)
+
+from relray.core.render import lane_paths, whole_paths
+from relray.core.render.integrator import trace
+
+
+def _glowing_blocks(data):
+    """The blocks glow too (two more emission rows, 20 emissive triangles in the light
+    CDF, two-sided): the lanes' binary search over the CDF has several steps."""
+    data["materials"] += [
+        {"name": "warm", "base_color": [0.6, 0.5, 0.4], "emission": [1.0, 0.6, 0.2],
+         "emission_strength": 0.8},
+        {"name": "cool", "base_color": [0.3, 0.4, 0.6], "emission": [0.2, 0.5, 1.0],
+         "emission_strength": 0.5}]
+    for o in data["objects"]:
+        if o["name"] == "short_block":
+            o["material"] = "warm"
+        elif o["name"] == "tall_block":
+            o["material"] = "cool"
+
+
+def _two_sided_light(data):
+    """The ceiling light emits from both faces (seen from above by rays that pass it)."""
+    for m in data["materials"]:
+        if m["name"] == "light":
+            m["one_sided_emission"] = False
+
+
+def lane_scene(scene: str, spectral: str, beta: float, **render) -> dict:
+    data = cornell(spectral=spectral, spp=8, **render)
+    data["motion"]["beta"] = [0.0, beta, 0.0]
+    {"cornell": lambda _: None, "glowing_blocks": _glowing_blocks,
+     "two_sided_light": _two_sided_light}[scene](data)
+    return data
+
+
+@pytest.mark.parametrize("scene,spectral,beta,render", [
+    ("cornell", "cie1931", 0.0, {}), ("cornell", "cie1931", 0.6, {}),
+    ("cornell", "rgb", 0.0, {}), ("cornell", "cie1931", 0.0, {"max_depth": 1}),
+    ("cornell", "cie1931", 0.0, {"max_depth": 2}),
+    ("cornell", "cie1931", 0.3, {"width": 13, "height": 7}),
+    ("glowing_blocks", "cie1931", 0.0, {}), ("glowing_blocks", "rgb", 0.4, {}),
+    ("two_sided_light", "cie1931", 0.0, {})])
+def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
+        tmp_path, scene, spectral, beta, render):
+    fr, ev = renderer(lane_scene(scene, spectral, beta, **render), tmp_path)
+    assert fr.whole_paths and fr.lane_paths
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
+    depth = fr.settings.max_depth
+    n = len(keys)
+    L1, t1 = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32)
+    rays1 = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu, nlanes, depth,
+                                  L1, t1)
+    L2, t2 = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
+    rays2 = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
+                                      np.zeros(n, np.float32), nlanes, depth, True, L2, t2)
+    L3, t3, _, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
+                         nlanes)
+    assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
+    if nlanes == 3:
+        assert np.all(L1[:, 3] == 0.0)
+    assert whole_paths.paths_differing(L1[:, :nlanes], L2[:, :nlanes]) <= 0.005
+    assert whole_paths.paths_differing(L1[:, :nlanes], L3[:, :nlanes]) <= 0.005
+    # the camera rays' distances (Embree's packet kernel against its single-ray one:
+    # equal but for rounding, on any CPU)
+    assert distances_differing(t1, t2) <= 0.005 and distances_differing(t1, t3) <= 0.005
+    # the same rays: every path's nearest-hit and shadow rays, 16 lanes to a packet
+    n_rays, n_shadow, packets = rays1
+    assert abs(n_rays - rays2[0]) <= 0.005 * n_rays
+    assert abs(n_shadow - rays2[1]) <= 0.005 * n_shadow + 1
+    assert n_rays / 16 <= packets < n_rays / 16 + 64
+
+
+def distances_differing(a: np.ndarray, b: np.ndarray) -> float:
+    """The share of camera rays whose hit distances differ by more than 1e-5 relative."""
+    return float(np.mean(np.abs(a - b) > 1e-5 * np.maximum(np.abs(a), np.abs(b))))
+
+
+def test_depth_one_sees_the_emitters_only(tmp_path):
+    """max_depth 1: the camera rays' hits and no bounce, so no shadow ray, and radiance
+    only where a camera ray meets the light."""
+    fr, ev = renderer(lane_scene("cornell", "cie1931", 0.0, max_depth=1), tmp_path)
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
+    n = len(keys)
+    L, t = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
+    n_rays, n_shadow, _ = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
+                                                nlanes, 1, L, t)
+    assert n_rays == n and n_shadow == 0
+    lit = L[:, 0] > 0.0
+    assert 0 < lit.sum() < n // 4
+
+
+def test_the_packet_log_holds_every_ray(tmp_path):
+    """lane_trace's log (benchmarks): each packet's rays and valid words, as many valid
+    lanes as rays traced, the camera rays in the first packets."""
+    fr, ev = renderer(lane_scene("cornell", "cie1931", 0.0), tmp_path)
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
+    n, depth = len(keys), fr.settings.max_depth
+    log = lane_paths.packet_log(n, depth)
+    L, t = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
+    n_rays, n_shadow, packets = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d,
+                                                      lamu, nlanes, depth, L, t, log)
+    rays, shadows, valid = log
+    assert np.count_nonzero(valid[:packets, 0]) == n_rays
+    assert np.count_nonzero(valid[:packets, 1]) == n_shadow
+    np.testing.assert_array_equal(rays[0, :3].T, o[:16])
+    np.testing.assert_array_equal(rays[0, 3:].T, d[:16])
+    lengths = shadows[:packets, 6][valid[:packets, 1] != 0]
+    assert np.all(lengths > 0.0) and np.all(np.isfinite(lengths))
+    directions = shadows[:packets, 3:6].transpose(0, 2, 1)[valid[:packets, 1] != 0]
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0, atol=1e-5)
+
+
+def _vertex_normals(data):
+    data["objects"].append({"name": "ball", "shape": "sphere", "center": [0.0, 0.0, 0.3],
+                            "radius": 0.2, "material": "white", "subdivisions": 2})
+
+
+@pytest.mark.parametrize("change", [_sky, _delta_lights, _textures, _vertex_normals,
+                                    "environment", "moving"])
+def test_scenes_that_need_more_take_scalar_whole_paths(tmp_path, change):
+    if change == "environment":
+        data = environment_scene(tmp_path)
+    elif change == "moving":
+        data = scene_data(tmp_path, "cornell+moving_blocks", "cie1931", 0.0)
+    else:
+        data = cornell()
+        change(*((data, tmp_path) if change is _textures else (data,)))
+    fr, _ = renderer(data, tmp_path)
+    assert fr.whole_paths and not fr.lane_paths
+    assert not lane_paths.applies(fr.kernel, fr.prep.tracer, False)
+
+
+def test_denoising_features_leave_the_lanes(tmp_path):
+    fr, _ = renderer(cornell(), tmp_path)
+    assert lane_paths.applies(fr.kernel, fr.prep.tracer, False)
+    assert not lane_paths.applies(fr.kernel, fr.prep.tracer, True)
+
+
+def test_the_renderer_takes_the_lanes_and_its_image_is_that_of_whole_paths(tmp_path):
+    fr, ev = renderer(cornell(spp=8), tmp_path)
+    assert fr.whole_paths and fr.lane_paths
+    img = fr.render(ev, 1)[0].resolve(fr.to_rgb)
+    fr.lane_paths = False
+    ref = fr.render(ev, 1)[0].resolve(fr.to_rgb)
+    np.testing.assert_allclose(img.rgba, ref.rgba, rtol=1e-3, atol=1e-4 * ref.rgba.max())
+    assert distances_differing(img.aovs["depth"], ref.aovs["depth"]) <= 0.005
