@@ -47,9 +47,19 @@ from numba import njit
 
 from relray.bench import common as cm
 from relray.bench import profile_scenes
-from relray.core.render import whole_paths
+from relray.core.render import lane_paths, whole_paths
 from relray.core.render.accel import MISS_DISTANCE
-from relray.core.render.embree import intersect_rays, occluded_rays
+from relray.core.render.embree import (
+    GEOM,
+    PACKET,
+    PACKET_WORDS,
+    PRIM,
+    TFAR,
+    intersect16,
+    intersect_rays,
+    occluded16,
+    occluded_rays,
+)
 from relray.core.render.integrator import FAST_MATH, RR_DEPTH, trace
 from relray.core.render.sampling import (
     DIM_BSDF,
@@ -79,6 +89,47 @@ def draw_numbers(keys, bounces):  # pragma: no cover - compiled
             if depth + 1 >= RR_DEPTH:
                 acc += rand(key, bounce_dim(depth, DIM_ROULETTE))
     return acc
+
+
+@njit(cache=True, nogil=True)
+def replay_packets(scene, log_hit, log_shadow, log_valid, n):  # pragma: no cover - compiled
+    """Embree alone on the lane kernel's packets (``lane_paths.packet_log``, the first
+    ``n``): each nearest-hit packet and each shadow packet traced again, in order, with
+    the valid words they were traced with. Returns the hits found (so that nothing is
+    left out)."""
+    W = PACKET
+    raw = np.empty(PACKET_WORDS * W + 16, np.uint32)
+    off = (-raw.ctypes.data % 64) // 4
+    hit = raw[off:off + PACKET_WORDS * W]
+    f = hit.view(np.float32)
+    vraw = np.empty(W + 16, np.int32)
+    voff = (-vraw.ctypes.data % 64) // 4
+    valid = vraw[voff:voff + W]
+    found = 0
+    for k in range(n):
+        for shadow in range(2):
+            for lane in range(W):
+                for c in range(3):
+                    f[c * W + lane] = log_shadow[k, c, lane] if shadow else log_hit[k, c, lane]
+                    f[(4 + c) * W + lane] = (log_shadow[k, 3 + c, lane] if shadow
+                                             else log_hit[k, 3 + c, lane])
+                f[3 * W + lane] = 0.0
+                f[7 * W + lane] = 0.0
+                f[TFAR * W + lane] = log_shadow[k, 6, lane] if shadow else MISS_DISTANCE
+                hit[9 * W + lane] = 0xFFFFFFFF
+                hit[10 * W + lane] = 0
+                hit[11 * W + lane] = 0
+                hit[PRIM * W + lane] = 0xFFFFFFFF
+                hit[GEOM * W + lane] = 0xFFFFFFFF
+                valid[lane] = log_valid[k, shadow, lane]
+            if shadow:
+                occluded16(scene, valid, hit)
+            else:
+                intersect16(scene, valid, hit)
+            for lane in range(W):
+                found += valid[lane] != 0 and (f[TFAR * W + lane] < 0.0 if shadow
+                                               else hit[GEOM * W + lane] != 0xFFFFFFFF)
+    return found
 
 
 def camera_stage(bench: cm.RelrayBench, size: int, spp: int, seed: int = 0):
@@ -157,7 +208,26 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
     draw_numbers(keys[:1], bounces[:1])
     times: dict[str, list[float]] = {"wavefront": [], "whole": [], "embree": [],
                                      "numbers": []}
+    # the SIMD lanes (lane_paths.py), where they apply: the kernel, and Embree alone on its
+    # packets (recorded, then traced again in the same order)
+    lanes = lane_paths.applies(sc, prep.tracer, False)
+    lanes_row: dict[str, Any] = {}
+    if lanes:
+        plog = lane_paths.packet_log(n, depth)
+        L2 = np.empty((n, 4), np.float32)
+        _, _, packets = lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2,
+                                              first_t, plog)
+        lanes_row = {"lanes_paths_differing": whole_paths.paths_differing(L2, whole_l),
+                     "lanes_per_packet": n_rays / packets}
+        times.update(lanes=[], embree16=[])
     for _ in range(reps):
+        if lanes:
+            t0 = time.thread_time()
+            lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2, first_t)
+            times["lanes"].append(time.thread_time() - t0)
+            t0 = time.thread_time()
+            replay_packets(prep.tracer.handle, *plog, packets)
+            times["embree16"].append(time.thread_time() - t0)
         times["wavefront"].append(run_wavefront()[0])
         t0 = time.thread_time()
         run_whole(False)
@@ -181,7 +251,21 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
             "agreement_z": agreement_z(whole_l.astype(np.float64),
                                        wave_l.astype(np.float64)),
             "paths_differing": whole_paths.paths_differing(whole_l, wave_l),
-            "load": cm.load_average()[0]}
+            **lanes_columns(ns, lanes_row), "load": cm.load_average()[0]}
+
+
+def lanes_columns(ns: dict[str, float], row: dict[str, Any]) -> dict[str, Any]:
+    """:func:`measure`'s SIMD-lane columns (NaN where the lanes do not apply): the lane
+    kernel's CPU per path, Embree alone on its packets, the rest, Embree's share, the
+    lanes ÷ whole paths and the lanes' agreement with whole paths."""
+    if "lanes" not in ns:
+        return {k: float("nan") for k in ("lanes_ns", "embree16_ns", "lanes_other_ns",
+                                          "lanes_embree_share", "lanes_over_whole",
+                                          "lanes_paths_differing", "lanes_per_packet")}
+    return {"lanes_ns": ns["lanes"], "embree16_ns": ns["embree16"],
+            "lanes_other_ns": ns["lanes"] - ns["embree16"],
+            "lanes_embree_share": ns["embree16"] / ns["lanes"],
+            "lanes_over_whole": ns["lanes"] / ns["whole"], **row}
 
 
 def main(argv: list[str] | None = None) -> None:

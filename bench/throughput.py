@@ -36,6 +36,7 @@ from relray.core.render import camera as camera_mod
 from relray.core.render import film as film_mod
 from relray.core.render import frames as render
 from relray.core.render import integrator as integrator_mod
+from relray.core.render import lane_paths as lane_paths_mod
 from relray.core.render import rest_frames as rest_frames_mod
 from relray.core.render import whole_paths as whole_paths_mod
 from relray.core.scene import job as jobmod
@@ -50,6 +51,7 @@ STAGES: dict[str, list[tuple[Any, str]]] = {
     "area lights": [(integrator_mod, "cross_area_lights")],
     "trace": [(render, "trace")],
     "whole paths": [(whole_paths_mod, "trace")],
+    "lane paths": [(lane_paths_mod, "trace")],
     "path keys": [(render, "path_keys")],
     "primary rays": [(camera_mod.PinholeCamera, "primary_rays"),
                      (camera_mod.PinholeCamera, "directions_cam"), (render, "lab_rays"),
@@ -156,6 +158,9 @@ class StageMeter:
         # (nearest-hit, shadow); its shadow rays are also counted apart
         self._wrap(whole_paths_mod, "lambert_paths", "whole-path kernel",
                    lambda a, out: out[0] + out[1] + self.count("whole-path shadow", out[1]))
+        # so does the lane kernel (16 paths at a time, its rays in Embree's packets)
+        self._wrap(lane_paths_mod, "lane_trace", "lane-path kernel",
+                   lambda a, out: out[0] + out[1] + self.count("lane-path shadow", out[1]))
         for stage, targets in self.stages.items():
             for owner, name in targets:
                 self._wrap(owner, name, stage)
@@ -192,10 +197,11 @@ def measure_bench(bench: cm.RelrayBench, threads: int, repeat: int = 3,
         row = {"wall_s": t.wall, "cpu_s": t.cpu, "paths": stats.paths, "rays": m.rays,
                "intersect_rays": m.rays_by.get("embree run intersect", 0)
                + m.rays_by.get("moving run intersect", 0)
-               + m.rays_by.get("whole-path kernel", 0) - m.rays_by.get("whole-path shadow", 0),
+               + m.rays_by.get("whole-path kernel", 0) - m.rays_by.get("whole-path shadow", 0)
+               + m.rays_by.get("lane-path kernel", 0) - m.rays_by.get("lane-path shadow", 0),
                "occluded_rays": m.rays_by.get("embree run occluded", 0)
                + m.rays_by.get("moving run occluded", 0) + m.rays_by.get("shade", 0)
-               + m.rays_by.get("whole-path shadow", 0),
+               + m.rays_by.get("whole-path shadow", 0) + m.rays_by.get("lane-path shadow", 0),
                "embree_s": embree, "load1": load,
                "hit_fraction": float(film.sum_alpha.sum() / max(film.count.sum(), 1))}
         if profile:
@@ -234,7 +240,9 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
     trace - Embree calls - velocity groups - shade - add_shadows
     (buffers); scenes that take whole paths (``render/whole_paths.py``) spend their
     tracing in "whole-path kernel" (Embree inside it), its wrapper's buffers in "whole
-    paths: other"; "chunk: other" is chunk - trace - whole paths - camera - hero - film
+    paths: other", and those that take SIMD lanes (``render/lane_paths.py``) in
+    "lane-path kernel" and "lane paths: other"; "chunk: other" is chunk - trace - whole
+    paths - lane paths - camera - hero - film
     (the inline numpy
     left in ``_trace_chunk``: D⁵, repeat/tile, AOVs); "outside chunks" is the process CPU
     time - chunk (thread pool, tiles, adaptive passes, other threads of the process).
@@ -264,10 +272,14 @@ def profile_table(m: dict[str, Any]) -> list[dict[str, Any]]:
          - g("shade", "add_shadows", "area lights")),
         ("whole-path kernel (with all its Embree queries)", g("whole-path kernel")),
         ("whole paths: other (buffers)", g("whole paths") - g("whole-path kernel")),
+        ("lane-path kernel (16 paths in SIMD lanes, with its Embree packets)",
+         g("lane-path kernel")),
+        ("lane paths: other (buffers)", g("lane paths") - g("lane-path kernel")),
         *((f"camera: {n}", g(n)) for n in CAMERA_STAGES),
         *((f"hero: {n}", g(n)) for n in HERO_STAGES),
         *((f"film: {n}", g(n)) for n in FILM_STAGES),
-        ("chunk: other (inline numpy)", g("chunk") - g("trace", "whole paths") - inner),
+        ("chunk: other (inline numpy)",
+         g("chunk") - g("trace", "whole paths", "lane paths") - inner),
         ("outside chunks (threads, tiles, passes)", total - g("chunk")),
     ]
     return [{"stage": name, "seconds": v, "share": v / total,

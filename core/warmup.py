@@ -3,7 +3,8 @@
 ``python -m relray.core.warmup`` renders a tiny frame of :data:`WARMUP_JOB` (a static
 and a moving sphere, a point and an area light, every AOV, the default spectral model)
 and of the same scene without the moving sphere, then a static Lambert scene plain, under
-an environment map, with an image texture and with both (:func:`warmup_jobs`), which
+a constant sky, under an environment map, with an image texture, with both and with a
+moving box (:func:`warmup_jobs`), which
 runs every numba kernel a frame uses, so their machine code lands in the kernel
 cache (``relray.core.kernel_cache_dir``). A later process that renders loads the kernels
 from there in about a second instead of compiling them for tens of seconds. The Blender
@@ -74,25 +75,28 @@ def _write_image(path: Path, pixels: np.ndarray) -> str:
 
 
 def lambert_variants(folder: Path) -> list[dict[str, Any]]:
-    """:data:`LAMBERT_JOB` under an environment map, with image textures, with both, and
-    with its box moving: the whole-path kernel is compiled apart for each kind
-    (``whole_paths.kernel``). Their 8 × 4 map and 2 × 2 texture are written into
-    ``folder``."""
+    """:data:`LAMBERT_JOB` under a constant sky, under an environment map, with image
+    textures, with both, and with its box moving: the whole-path kernel is compiled
+    apart for each kind (``whole_paths.kernel``; :data:`LAMBERT_JOB` itself takes the SIMD
+    lanes of ``render/lane_paths.py``, a sky the plain whole-path kernel). Their 8 × 4 map
+    and 2 × 2 texture are written into ``folder``."""
     sky = _write_image(folder / "sky.exr", np.full((4, 8, 3), 0.5))
     checker = _write_image(folder / "checker.exr", np.indices((2, 2, 3)).sum(axis=0) % 2)
+    plain = {**LAMBERT_JOB, "scene": {"background": [0.1, 0.1, 0.1]}}
     env = {**LAMBERT_JOB, "scene": {"environment": {"file": sky}}}
     tex = copy.deepcopy(LAMBERT_JOB)
     tex["materials"][0]["base_color_texture"] = checker
     moving = copy.deepcopy(LAMBERT_JOB)
     moving["objects"][0]["velocity"] = [0.0, 0.0, 0.5]
-    return [env, tex, {**tex, "scene": env["scene"]}, moving]
+    return [plain, env, tex, {**tex, "scene": env["scene"]}, moving]
 
 
 def warmup_jobs(folder: Path) -> list[dict[str, Any]]:
     """:data:`WARMUP_JOB`, the same without its moving sphere, :data:`LAMBERT_JOB` and
     :func:`lambert_variants` (their files in ``folder``): the kernels are typed per
     argument (a scene without moving objects passes other types), and the Lambert scenes
-    take the whole-path kernel, compiled per kind, so every kind is compiled."""
+    take the SIMD lanes or the whole-path kernel, compiled per kind, so every kind is
+    compiled."""
     static = dict(WARMUP_JOB)
     static["objects"] = [o for o in WARMUP_JOB["objects"] if "velocity" not in o]
     return [static, WARMUP_JOB, LAMBERT_JOB, *lambert_variants(folder)]

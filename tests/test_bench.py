@@ -74,19 +74,26 @@ def test_toml_writer_round_trips_the_presets():
 
 
 def test_stage_meter_restores_the_core():
-    """Both integrators are metered: the Cornell box's whole paths (the kernel's rays
-    counted from what it returns) and the wavefront's stages; the core is restored."""
-    from relray.core.render import accel, integrator, whole_paths
+    """The three integrators are metered: the Cornell box's SIMD lanes and whole paths
+    (the kernels' rays counted from what they return) and the wavefront's stages; the
+    core is restored."""
+    from relray.core.render import accel, integrator, lane_paths, whole_paths
     from relray.core.render import frames as render
 
     def core():
         return (render.trace, integrator.shade, accel.Accel.intersect, accel.intersect_rays,
-                whole_paths.trace, whole_paths.lambert_paths)
+                whole_paths.trace, whole_paths.lambert_paths, lane_paths.trace,
+                lane_paths.lane_trace)
 
     before = core()
     b = common.RelrayBench(common.make_job(common.job_dict(), width=8, height=8, spp=1))
     fr = b.renderer(threads=1)
-    assert fr.whole_paths
+    assert fr.whole_paths and fr.lane_paths
+    with throughput.StageMeter() as m:
+        b.render(renderer=fr)
+    assert m.seconds["lane-path kernel"] > 0 and "whole-path kernel" not in m.seconds
+    assert m.rays_by["lane-path kernel"] >= 64 + m.rays_by["lane-path shadow"] > 64
+    fr.lane_paths = False
     with throughput.StageMeter() as m:
         b.render(renderer=fr)
     assert m.seconds["whole-path kernel"] > 0 and "shade" not in m.seconds

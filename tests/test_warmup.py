@@ -32,26 +32,32 @@ def test_a_preset_passes_the_kernels_the_types_the_warm_up_compiled(preset, tmp_
 
 def whole_path_kernel(job):
     """The whole-path kernel a job's scene runs, as (map, textures, moving bodies,
-    argument types), or None where the scene takes the wavefront
-    (render/whole_paths.py)."""
-    from relray.core.render import whole_paths
+    argument types); ("lanes", argument types) where it takes the SIMD lanes
+    (render/lane_paths.py); None where it takes the wavefront (render/whole_paths.py)."""
+    from relray.core.render import lane_paths, whole_paths
 
     prep = prepare(build_scene(job), job.render.spectral)
     if not whole_paths.applies(prep.kernel, prep.tracer, False):
         return None
+    args = tuple(numba.typeof(a) for a in whole_paths.scene_args(prep.kernel, prep.tracer))
+    if lane_paths.applies(prep.kernel, prep.tracer, False):
+        return ("lanes", args)
     return (prep.kernel.env_on, prep.kernel.tex.enabled, isinstance(prep.tracer, MovingScene),
-            tuple(numba.typeof(a) for a in whole_paths.scene_args(prep.kernel, prep.tracer)))
+            args)
 
 
 def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
-    """The whole-path kernel is compiled apart for a map, textures, both and neither, and
-    for moving bodies (``whole_paths.kernel``): the warm-up renders each kind, with the
-    argument types the Cornell box (untextured), the default fly-by (textured) and the
-    train and Terrell presets (moving bodies, moving lights) pass."""
+    """The SIMD lanes, and the whole-path kernel compiled apart for a map, textures, both
+    and neither, and for moving bodies (``whole_paths.kernel``): the warm-up renders each
+    kind, with the argument types the Cornell box (the lanes), the default fly-by
+    (textured), a seed figure (a sky and smooth shading: the plain whole-path kernel) and
+    the train and Terrell presets (moving bodies, moving lights) pass."""
     warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
             for d in warmup.warmup_jobs(tmp_path)} - {None}
-    assert {kind[:3] for kind in warm} == {(False, False, False), (True, False, False),
-                                           (False, True, False), (True, True, False),
-                                           (False, False, True)}
-    for preset in ("cornell.toml", "flyby.toml", "moving/train.toml", "moving/terrell.toml"):
+    assert {kind[:-1] for kind in warm} == {("lanes",), (False, False, False),
+                                            (True, False, False), (False, True, False),
+                                            (True, True, False), (False, False, True)}
+    for preset in ("cornell.toml", "flyby.toml", "seed_figures/fig1-1.toml",
+                   "moving/train.toml", "moving/terrell.toml"):
         assert whole_path_kernel(load_job(PRESETS / preset)) in warm, preset
+    assert whole_path_kernel(load_job(PRESETS / "cornell.toml"))[0] == "lanes"
