@@ -216,7 +216,7 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
         plog = lane_paths.packet_log(n, depth)
         L2 = np.empty((n, 4), np.float32)
         _, _, packets = lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2,
-                                              first_t, plog)
+                                              first_t, log=plog)
         lanes_row = {"lanes_paths_differing": whole_paths.paths_differing(L2, whole_l),
                      "lanes_per_packet": n_rays / packets}
         times.update(lanes=[], embree16=[])

@@ -2,9 +2,9 @@
 
 ``python -m relray.core.warmup`` renders a tiny frame of :data:`WARMUP_JOB` (a static
 and a moving sphere, a point and an area light, every AOV, the default spectral model)
-and of the same scene without the moving sphere, then a static Lambert scene plain, under
-a constant sky, under an environment map, with an image texture, with both and with a
-moving box (:func:`warmup_jobs`), which
+and of the same scene without the moving sphere, then a static Lambert scene plain and in
+the variants of :func:`lambert_variants` (a sky, smooth shading, no light, a map,
+textures, a moving box), which
 runs every numba kernel a frame uses, so their machine code lands in the kernel
 cache (``relray.core.kernel_cache_dir``). A later process that renders loads the kernels
 from there in about a second instead of compiling them for tens of seconds. The Blender
@@ -75,20 +75,27 @@ def _write_image(path: Path, pixels: np.ndarray) -> str:
 
 
 def lambert_variants(folder: Path) -> list[dict[str, Any]]:
-    """:data:`LAMBERT_JOB` under a constant sky, under an environment map, with image
-    textures, with both, and with its box moving: the whole-path kernel is compiled
-    apart for each kind (``whole_paths.kernel``; :data:`LAMBERT_JOB` itself takes the SIMD
-    lanes of ``render/lane_paths.py``, a sky the plain whole-path kernel). Their 8 × 4 map
+    """:data:`LAMBERT_JOB` under a constant sky, with a smooth-shaded sphere, with both,
+    without its light, under an environment map, with image textures, with both, and
+    with its box moving: the SIMD lanes (``render/lane_paths.py``: :data:`LAMBERT_JOB`
+    itself and the first three) and the whole-path kernel (the others) are compiled
+    apart for each kind (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map
     and 2 × 2 texture are written into ``folder``."""
     sky = _write_image(folder / "sky.exr", np.full((4, 8, 3), 0.5))
     checker = _write_image(folder / "checker.exr", np.indices((2, 2, 3)).sum(axis=0) % 2)
-    plain = {**LAMBERT_JOB, "scene": {"background": [0.1, 0.1, 0.1]}}
+    under_sky = {**LAMBERT_JOB, "scene": {"background": [0.1, 0.1, 0.1]}}
+    smooth = copy.deepcopy(LAMBERT_JOB)
+    smooth["objects"].append({"shape": "sphere", "center": [0.0, 0.0, 2.0], "radius": 0.3,
+                              "material": "grey", "subdivisions": 1})
+    dark = copy.deepcopy(LAMBERT_JOB)  # no light: the lanes have nothing to sample
+    dark["objects"] = dark["objects"][:1]
     env = {**LAMBERT_JOB, "scene": {"environment": {"file": sky}}}
     tex = copy.deepcopy(LAMBERT_JOB)
     tex["materials"][0]["base_color_texture"] = checker
     moving = copy.deepcopy(LAMBERT_JOB)
     moving["objects"][0]["velocity"] = [0.0, 0.0, 0.5]
-    return [plain, env, tex, {**tex, "scene": env["scene"]}, moving]
+    return [under_sky, smooth, {**smooth, "scene": under_sky["scene"]}, dark, env, tex,
+            {**tex, "scene": env["scene"]}, moving]
 
 
 def warmup_jobs(folder: Path) -> list[dict[str, Any]]:

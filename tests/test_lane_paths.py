@@ -1,5 +1,6 @@
 """core/render/lane_paths.py: sixteen Lambert paths at a time in SIMD lanes, for static
-scenes lit by emissive triangles alone.
+scenes without a map or textures (flat or smooth-shaded; lit by emissive triangles,
+point, spot and sun lights and a constant sky).
 
 Its estimator is whole_paths.py's (and the wavefront integrator's), with the same random
 numbers, so the three must give the same radiance path by path (to float32 rounding: a
@@ -49,11 +50,31 @@ def _two_sided_light(data):
             m["one_sided_emission"] = False
 
 
+def _vertex_normals(data):
+    """A smooth-shaded ball (interpolated vertex normals) on the floor."""
+    data["objects"].append({"name": "ball", "shape": "sphere", "center": [0.0, 0.0, 0.3],
+                            "radius": 0.2, "material": "white", "subdivisions": 2})
+
+
+def _sky_on_a_transparent_film(data):
+    """A constant sky that the camera rays do not see (render.transparent)."""
+    _sky(data)
+    data["render"]["transparent"] = True
+
+
+def _everything(data):
+    """Smooth shading, a sky, delta lights and glowing blocks together."""
+    for change in (_vertex_normals, _sky, _delta_lights, _glowing_blocks):
+        change(data)
+
+
 def lane_scene(scene: str, spectral: str, beta: float, **render) -> dict:
     data = cornell(spectral=spectral, spp=8, **render)
     data["motion"]["beta"] = [0.0, beta, 0.0]
     {"cornell": lambda _: None, "glowing_blocks": _glowing_blocks,
-     "two_sided_light": _two_sided_light}[scene](data)
+     "two_sided_light": _two_sided_light, "vertex_normals": _vertex_normals, "sky": _sky,
+     "sky_transparent": _sky_on_a_transparent_film, "delta_lights": _delta_lights,
+     "everything": _everything}[scene](data)
     return data
 
 
@@ -63,22 +84,26 @@ def lane_scene(scene: str, spectral: str, beta: float, **render) -> dict:
     ("cornell", "cie1931", 0.0, {"max_depth": 2}),
     ("cornell", "cie1931", 0.3, {"width": 13, "height": 7}),
     ("glowing_blocks", "cie1931", 0.0, {}), ("glowing_blocks", "rgb", 0.4, {}),
-    ("two_sided_light", "cie1931", 0.0, {})])
+    ("two_sided_light", "cie1931", 0.0, {}), ("vertex_normals", "cie1931", 0.0, {}),
+    ("sky", "cie1931", 0.3, {}), ("sky_transparent", "cie1931", 0.0, {}),
+    ("delta_lights", "cie1931", 0.0, {}), ("delta_lights", "rgb", 0.0, {}),
+    ("everything", "cie1931", 0.5, {}), ("everything", "rgb", 0.0, {"max_depth": 3})])
 def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
         tmp_path, scene, spectral, beta, render):
     fr, ev = renderer(lane_scene(scene, spectral, beta, **render), tmp_path)
     assert fr.whole_paths and fr.lane_paths
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth = fr.settings.max_depth
+    seen = not fr.settings.transparent
     n = len(keys)
     L1, t1 = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32)
     rays1 = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu, nlanes, depth,
-                                  L1, t1)
+                                  L1, t1, sky_seen=seen)
     L2, t2 = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
     rays2 = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
-                                      np.zeros(n, np.float32), nlanes, depth, True, L2, t2)
+                                      np.zeros(n, np.float32), nlanes, depth, seen, L2, t2)
     L3, t3, _, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
-                         nlanes)
+                         nlanes, sky_seen=seen)
     assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
     if nlanes == 3:
         assert np.all(L1[:, 3] == 0.0)
@@ -92,6 +117,9 @@ def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
     assert abs(n_rays - rays2[0]) <= 0.005 * n_rays
     assert abs(n_shadow - rays2[1]) <= 0.005 * n_shadow + 1
     assert n_rays / 16 <= packets < n_rays / 16 + 64
+    if "sky" in scene or scene == "everything":  # camera rays that escape
+        assert np.any(t1 >= 1e30)
+        assert np.all(L1[t1 >= 1e30] == 0.0) == (not seen)
 
 
 def distances_differing(a: np.ndarray, b: np.ndarray) -> float:
@@ -122,7 +150,7 @@ def test_the_packet_log_holds_every_ray(tmp_path):
     log = lane_paths.packet_log(n, depth)
     L, t = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
     n_rays, n_shadow, packets = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d,
-                                                      lamu, nlanes, depth, L, t, log)
+                                                      lamu, nlanes, depth, L, t, log=log)
     rays, shadows, valid = log
     assert np.count_nonzero(valid[:packets, 0]) == n_rays
     assert np.count_nonzero(valid[:packets, 1]) == n_shadow
@@ -134,13 +162,11 @@ def test_the_packet_log_holds_every_ray(tmp_path):
     np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0, atol=1e-5)
 
 
-def _vertex_normals(data):
-    data["objects"].append({"name": "ball", "shape": "sphere", "center": [0.0, 0.0, 0.3],
-                            "radius": 0.2, "material": "white", "subdivisions": 2})
+def _no_light(data):
+    data["objects"] = [o for o in data["objects"] if o["name"] != "ceiling_light"]
 
 
-@pytest.mark.parametrize("change", [_sky, _delta_lights, _textures, _vertex_normals,
-                                    "environment", "moving"])
+@pytest.mark.parametrize("change", [_textures, _no_light, "environment", "moving"])
 def test_scenes_that_need_more_take_scalar_whole_paths(tmp_path, change):
     if change == "environment":
         data = environment_scene(tmp_path)

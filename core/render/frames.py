@@ -269,8 +269,8 @@ class FrameRenderer:
         # a scene of Lambert surfaces (no alpha masks, no area-light quads), moving or not:
         # whole paths in one kernel call (whole_paths.py), else the wavefront integrator
         self.whole_paths = whole_paths.applies(self.kernel, prep.tracer, self.features)
-        # ... and of those, a static one lit by emissive triangles alone, without a map,
-        # sky, textures or vertex normals: sixteen paths at a time in SIMD lanes
+        # ... and of those, a static one with a light to sample, without a map or textures:
+        # sixteen paths at a time in SIMD lanes
         # (lane_paths.py; either flag False turns to the next integrator)
         self.lane_paths = self.whole_paths and lane_paths.applies(self.kernel, prep.tracer,
                                                                    self.features)
@@ -416,6 +416,7 @@ class FrameRenderer:
         if self.whole_paths and self.lane_paths:
             L, t_hit, seg = lane_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
                                              o_local, d_lab, lamu, nlanes,
+                                             sky_seen=not s.transparent,
                                              buffers=keep.setdefault("whole", {}))
         elif self.whole_paths:
             L, t_hit, seg = whole_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,

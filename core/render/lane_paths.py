@@ -27,6 +27,8 @@ own cost.
 from __future__ import annotations
 
 import math
+import threading
+from typing import Any
 
 import numpy as np
 from llvmlite import ir
@@ -49,7 +51,16 @@ from .embree import (
     intersect16,
     occluded16,
 )
-from .integrator import FAST_MATH, RR_DEPTH, KernelScene, column, lerp, wavefront_buffers
+from .integrator import (
+    FAST_MATH,
+    RR_DEPTH,
+    KernelScene,
+    column,
+    lerp,
+    shading_normal,
+    vertex_normal,
+    wavefront_buffers,
+)
 from .sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -77,13 +88,11 @@ assert W == 16 and PACKET_WORDS * W == 384
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     """Whether :func:`lane_paths` can trace the scene ``sc``: one where
     :func:`.whole_paths.applies` (Lambert, no alpha mask, no area-light quad, no
-    denoising features) whose BVH is static, with no environment map, constant sky,
-    image texture or vertex normals, lit by emissive triangles only."""
-    kinds = np.asarray(sc.l_kind)
+    denoising features) whose BVH is static, with no environment map and no image
+    texture, and with a light to sample (emissive triangles, point, spot or sun lights,
+    the constant sky)."""
     return (isinstance(accel, Accel) and whole_paths.applies(sc, accel, features)
-            and not sc.env_on and not sc.tex.enabled and not bool(sc.has_vn)
-            and int(sc.sky_row) < 0 and len(kinds) > 0
-            and bool(np.all(kinds == lightmod.TRIANGLE)))
+            and not sc.env_on and not sc.tex.enabled and len(sc.l_kind) > 0)
 
 
 _LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
@@ -141,20 +150,25 @@ def fill_packet(ray, path, hit, hitf, valid):  # pragma: no cover - compiled
 
 
 @njit(**_LANES)
-def shade_hits(geo, mats, eps_base, max_depth, hit, hitf, lanes, bounce):  # pragma: no cover
+def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce, smooth,
+               general):  # pragma: no cover - compiled
     """The packet's hits, lane by lane: the point and the geometric normal turned towards
     the ray (``pt``, ``gn``), the emission of a front face (or a two-sided emitter) times
     the throughput into ``acc`` (MIS-weighted against NEE, w = p_bsdf² / (p_bsdf² +
     p_light²), p_light = p_sel t² / (A |cos θ_g|); the camera ray w = 1), ρ(λ) per lane,
     the offset ε(p), the light's pair of numbers, whether the path goes on (``cont``).
     ``geo``, ``mats``, ``lanes``, ``bounce``: :func:`lane_paths`' tuples."""
-    v0, e1, e2, ng, area, tri_mat = geo
+    v0, e1, e2, ng, area, tri_mat, vn, has_vn = geo
     refl, emit, emit_row, one_sided, tri_pmf = mats[:5]
+    sky_pmf, sky_row = mats[-2:]
     path, key, depth, ray, thr, li, lf, acc, prev_pdf = lanes
-    pt, gn, eps, rho, ua, pos, _, cont, _ = bounce
+    pt, gn, nrm, eps, rho, ua, pos, _, cont, _ = bounce
+    w_sky = lightmod.sky_light_pdf(sky_pmf)
     for lane in range(eps.shape[0]):
         h = path[lane] >= 0 and hit[GEOM * W + lane] != _INVALID
         tri = np.int64(hit[PRIM * W + lane]) if h else 0
+        dx, dy, dz = (np.float64(ray[3, lane]), np.float64(ray[4, lane]),
+                      np.float64(ray[5, lane]))
         t = hitf[TFAR * W + lane]
         b1, b2 = hitf[HIT_U * W + lane], hitf[HIT_V * W + lane]
         dep = depth[lane]
@@ -162,11 +176,18 @@ def shade_hits(geo, mats, eps_base, max_depth, hit, hitf, lanes, bounce):  # pra
         py = v0[tri, 1] + b1 * e1[tri, 1] + b2 * e2[tri, 1]
         pz = v0[tri, 2] + b1 * e1[tri, 2] + b2 * e2[tri, 2]
         gx, gy, gz = ng[tri, 0], ng[tri, 1], ng[tri, 2]
-        cos_g = -(gx * np.float64(ray[3, lane]) + gy * np.float64(ray[4, lane])
-                  + gz * np.float64(ray[5, lane]))
+        cos_g = -(gx * dx + gy * dy + gz * dz)
         front = cos_g > 0.0
         sgn = np.float32(1.0) if front else np.float32(-1.0)
-        gn[0, lane], gn[1, lane], gn[2, lane] = gx * sgn, gy * sgn, gz * sgn
+        g = (gx * sgn, gy * sgn, gz * sgn)
+        gn[0, lane], gn[1, lane], gn[2, lane] = g
+        # the shading normal: the interpolated vertex normal on g's side (flat: g)
+        if smooth:
+            nrm[0, lane], nrm[1, lane], nrm[2, lane] = shading_normal(
+                vertex_normal(vn, tri, b1, b2), g, dx, dy, dz)
+        else:
+            nrm[0, lane], nrm[1, lane], nrm[2, lane] = (np.float64(g[0]), np.float64(g[1]),
+                                                        np.float64(g[2]))
         pt[0, lane], pt[1, lane], pt[2, lane] = px, py, pz
         m = tri_mat[tri]
         er = emit_row[m]
@@ -176,10 +197,18 @@ def shade_hits(geo, mats, eps_base, max_depth, hit, hitf, lanes, bounce):  # pra
         if dep > 0 and pm > 0.0:
             wt = power_heuristic(prev_pdf[lane], lightmod.triangle_light_pdf(
                 pm, area[tri], t, cos_g))
+        # a ray that escapes sees the sky (MIS against NEE towards it; not the camera ray
+        # on a transparent film)
+        sky = False
         row = er if er >= 0 else 0
+        if general:
+            sky = path[lane] >= 0 and not h and sky_row >= 0 and (dep > 0 or sky_seen)
+            if dep > 0 and sky_pmf > 0.0:
+                wt = wt if h else power_heuristic(prev_pdf[lane], w_sky)
+            row = row if h else max(sky_row, 0)
         for j in range(4):
             e = thr[j, lane] * wt * lerp(emit, row, li[j, lane], lf[j, lane])
-            acc[j, lane] += e if lit else 0.0
+            acc[j, lane] += e if lit or sky else 0.0
             rho[j, lane] = lerp(refl, m, li[j, lane], lf[j, lane])
         cont[lane] = h and dep + 1 < max_depth
         eps[lane] = eps_base + RAY_OFFSET_POINT * max(abs(px), max(abs(py), abs(pz)))
@@ -204,17 +233,18 @@ def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
 
 
 @njit(**_LANES)
-def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes,
-                 bounce):  # pragma: no cover - compiled
+def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce,
+                 general):  # pragma: no cover - compiled
     """Each lane's next-event estimation towards its light (the shadow ray into the
     ``RTCRay16`` ``shadow``, valid where the sample counts; its contribution thr ρ/π
     cos θ_i w L_e / p_light into ``nee``), then its continuation, cosine-weighted about
     g (the next ray, throughput × ρ, the roulette from ``RR_DEPTH`` on the largest lane:
     ``alive`` whether the path goes on)."""
-    v0, e1, e2, ng, area, tri_mat = geo
-    _, emit, _, one_sided, _, l_prim, l_row, l_scale, l_cdf = mats
+    v0, e1, e2, ng, area, tri_mat = geo[:6]
+    (_, emit, _, one_sided, _, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
+     l_cdf) = mats[:-2]
     _, key, depth, ray, thr, li, lf, _, prev_pdf = lanes
-    pt, gn, eps, rho, ua, pos, nee, cont, alive = bounce
+    pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive = bounce
     n_cdf = l_cdf.shape[0]
     lane4 = 1.0 if nlanes == 4 else 0.0
     for lane in range(eps.shape[0]):
@@ -226,15 +256,26 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes,
         lt = l_prim[k]
         px, py, pz = pt[0, lane], pt[1, lane], pt[2, lane]
         gx, gy, gz = gn[0, lane], gn[1, lane], gn[2, lane]
+        nx, ny, nz = nrm[0, lane], nrm[1, lane], nrm[2, lane]
         ep = eps[lane]
-        (wx, wy, wz), p_l, target, ok = lightmod.sample_triangle(
-            (v0[lt, 0], v0[lt, 1], v0[lt, 2]), (e1[lt, 0], e1[lt, 1], e1[lt, 2]),
-            (e2[lt, 0], e2[lt, 1], e2[lt, 2]), (ng[lt, 0], ng[lt, 1], ng[lt, 2]), area[lt],
-            one_sided[tri_mat[lt]], p_sel, u1, ua[1, lane], px, py, pz, ep)
-        scale = l_scale[k]
-        cos_i = wx * gx + wy * gy + wz * gz
-        go = cont[lane] and ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0
-        c = power_heuristic(p_l, cos_i * _INV_PI) * cos_i * scale / p_l * _INV_PI
+        if general:  # any kind of light
+            (wx, wy, wz), p_l, scale, delta, finite, target, ok = lightmod.sample_light(
+                lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot, v0,
+                                      e1, e2, ng, area, tri_mat, one_sided),
+                p_sel, u1, ua[1, lane], px, py, pz, ep)
+        else:  # emissive triangles only
+            (wx, wy, wz), p_l, target, ok = lightmod.sample_triangle(
+                (v0[lt, 0], v0[lt, 1], v0[lt, 2]), (e1[lt, 0], e1[lt, 1], e1[lt, 2]),
+                (e2[lt, 0], e2[lt, 1], e2[lt, 2]), (ng[lt, 0], ng[lt, 1], ng[lt, 2]),
+                area[lt], one_sided[tri_mat[lt]], p_sel, u1, ua[1, lane], px, py, pz, ep)
+            scale, delta, finite = np.float64(l_scale[k]), False, True
+        cos_i = wx * nx + wy * ny + wz * nz
+        go = (cont[lane] and ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0
+              and wx * gx + wy * gy + wz * gz > 0.0)
+        c = (1.0 if delta else power_heuristic(p_l, cos_i * _INV_PI)) * cos_i * scale / p_l \
+            * _INV_PI
+        # the shadow ray (integrator.shadow_ray): to a finite light's target, shortened by
+        # 1e-4 of its length; else along wi, 1e30 long
         ox, oy, oz = px + gx * ep, py + gy * ep, pz + gz * ep
         sx, sy, sz = target[0] - ox, target[1] - oy, target[2] - oz
         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
@@ -242,11 +283,11 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes,
         shadowf[W + lane] = np.float32(oy)
         shadowf[2 * W + lane] = np.float32(oz)
         shadowf[3 * W + lane] = 0.0
-        shadowf[4 * W + lane] = np.float32(sx / sl)
-        shadowf[5 * W + lane] = np.float32(sy / sl)
-        shadowf[6 * W + lane] = np.float32(sz / sl)
+        shadowf[4 * W + lane] = np.float32(sx / sl if finite else wx)
+        shadowf[5 * W + lane] = np.float32(sy / sl if finite else wy)
+        shadowf[6 * W + lane] = np.float32(sz / sl if finite else wz)
         shadowf[7 * W + lane] = 0.0
-        shadowf[TFAR * W + lane] = np.float32(sl * (1.0 - 1e-4))
+        shadowf[TFAR * W + lane] = np.float32(sl * (1.0 - 1e-4) if finite else 1e30)
         shadow[9 * W + lane] = _INVALID
         shadow[10 * W + lane] = 0
         shadow[11 * W + lane] = 0
@@ -258,11 +299,11 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes,
             nee[j, lane] = thr[j, lane] * r * c * lerp(emit, lrow, li[j, lane], lf[j, lane])
             thr[j, lane] *= r
             q = max(q, thr[j, lane] if j < 3 else thr[j, lane] * lane4)
+        # the continuation: cosine-weighted about n, refused below g
         b_1, b_2 = sobol2(key[lane], bounce_dim(dep, DIM_BSDF))
         lx, ly, lz = cosine_hemisphere(b_1, b_2)
-        fx, fy, fz = np.float64(gx), np.float64(gy), np.float64(gz)
-        tb, bb = onb(fx, fy, fz)
-        nx, ny, nz = to_world(lx, ly, lz, tb, bb, fx, fy, fz)
+        tb, bb = onb(nx, ny, nz)
+        nx, ny, nz = to_world(lx, ly, lz, tb, bb, nx, ny, nz)
         pdf = lz * _INV_PI
         onward = cont[lane] and pdf > 0.0 and nx * gx + ny * gy + nz * gz > 0.0
         roulette = dep + 1 >= RR_DEPTH and q < 1.0
@@ -287,114 +328,150 @@ def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
             acc[j, lane] += nee[j, lane] if seen else 0.0
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
-def lane_paths(handle, v0, e1, e2, ng, area, tri_mat, refl, emit, emit_row, one_sided, l_prim,
-               l_row, l_scale, l_cdf, tri_pmf, eps_base, keys, o, d, lamu, nlanes, max_depth,
-               L, first_t, log):  # pragma: no cover - compiled
-    """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
-    the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
-    coordinates), the outputs and the packet log (:data:`NO_LOG`: none kept). Returns
-    (nearest-hit rays, shadow rays, packets)."""
-    n_paths = keys.shape[0]
-    top = emit.shape[1] - 1
-    # the packets and the lanes' arrays live on the stack (sizes for W = 16: literals)
-    hit = _stack(1, 384, np.uint32)[0]
-    hitf = hit.view(np.float32)
-    shadow = _stack(1, 384, np.uint32)[0]
-    shadowf = shadow.view(np.float32)
-    valid = _stack(1, 16, np.int32)[0]
-    svalid = _stack(1, 16, np.int32)[0]
-    # a lane's path: its index (-1: none), key, bounce, ray, throughput and lanes' table
-    # columns, its radiance so far, the pdf of the ray's direction
-    path = _stack(1, 16, np.int64)[0]
-    key = _stack(1, 16, np.uint64)[0]
-    depth = _stack(1, 16, np.int64)[0]
-    ray = _stack(6, 16, np.float32)
-    thr = _stack(4, 16, np.float64)
-    li = _stack(4, 16, np.int64)
-    lf = _stack(4, 16, np.float64)
-    acc = _stack(4, 16, np.float32)
-    prev_pdf = _stack(1, 16, np.float64)[0]
-    # one bounce's values, between the lane loops
-    pt = _stack(3, 16, np.float32)
-    gn = _stack(3, 16, np.float32)
-    eps = _stack(1, 16, np.float64)[0]
-    rho = _stack(4, 16, np.float64)
-    ua = _stack(2, 16, np.float64)
-    pos = _stack(1, 16, np.int64)[0]
-    nee = _stack(4, 16, np.float64)
-    alive = _stack(1, 16, np.bool_)[0]
-    cont = _stack(1, 16, np.bool_)[0]
-    for lane in range(W):
-        path[lane] = -1
-        alive[lane] = False
-    geo = (v0, e1, e2, ng, area, tri_mat)
-    mats = (refl, emit, emit_row, one_sided, tri_pmf, l_prim, l_row, l_scale, l_cdf)
-    lanes = (path, key, depth, ray, thr, li, lf, acc, prev_pdf)
-    bounce = (pt, gn, eps, rho, ua, pos, nee, cont, alive)
-    log_hit, log_shadow, log_valid = log
-    record = log_hit.shape[0] > 1
-    nxt = 0
-    packets = 0
-    n_rays = 0
-    n_sh = 0
-    while True:
-        # the lanes whose path ended take the next camera rays
-        busy = 0
+def _compile(smooth: bool, general: bool) -> Any:
+    """The lane kernel for one kind of scene (:func:`kernel`): ``smooth`` vertex normals,
+    ``general`` lights other than emissive triangles (point, spot, sun, the constant
+    sky). Both are constants of the compiled code: LLVM drops the branches they close,
+    so the Cornell box's lanes carry no normal interpolation and no light kinds it does
+    not have (numba's on-disk cache keys each variant by its closure's values)."""
+
+    @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
+    def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit, emit_row,
+                   one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot, l_cdf, tri_pmf,
+                   sky_pmf, sky_row, eps_base, keys, o, d, lamu, nlanes, max_depth, sky_seen, L,
+                   first_t, log):  # pragma: no cover - compiled
+        """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
+        the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
+        coordinates), the outputs and the packet log (:data:`NO_LOG`: none kept). Returns
+        (nearest-hit rays, shadow rays, packets)."""
+        n_paths = keys.shape[0]
+        top = emit.shape[1] - 1
+        # the packets and the lanes' arrays live on the stack (sizes for W = 16: literals)
+        hit = _stack(1, 384, np.uint32)[0]
+        hitf = hit.view(np.float32)
+        shadow = _stack(1, 384, np.uint32)[0]
+        shadowf = shadow.view(np.float32)
+        valid = _stack(1, 16, np.int32)[0]
+        svalid = _stack(1, 16, np.int32)[0]
+        # a lane's path: its index (-1: none), key, bounce, ray, throughput and lanes' table
+        # columns, its radiance so far, the pdf of the ray's direction
+        path = _stack(1, 16, np.int64)[0]
+        key = _stack(1, 16, np.uint64)[0]
+        depth = _stack(1, 16, np.int64)[0]
+        ray = _stack(6, 16, np.float32)
+        thr = _stack(4, 16, np.float64)
+        li = _stack(4, 16, np.int64)
+        lf = _stack(4, 16, np.float64)
+        acc = _stack(4, 16, np.float32)
+        prev_pdf = _stack(1, 16, np.float64)[0]
+        # one bounce's values, between the lane loops
+        pt = _stack(3, 16, np.float32)
+        gn = _stack(3, 16, np.float32)
+        nrm = _stack(3, 16, np.float64)
+        eps = _stack(1, 16, np.float64)[0]
+        rho = _stack(4, 16, np.float64)
+        ua = _stack(2, 16, np.float64)
+        pos = _stack(1, 16, np.int64)[0]
+        nee = _stack(4, 16, np.float64)
+        alive = _stack(1, 16, np.bool_)[0]
+        cont = _stack(1, 16, np.bool_)[0]
         for lane in range(W):
-            if path[lane] < 0 and nxt < n_paths:
-                i = nxt
-                nxt += 1
-                path[lane] = i
-                key[lane] = keys[i]
-                depth[lane] = 0
-                for c in range(3):
-                    ray[c, lane] = o[i, c]
-                    ray[3 + c, lane] = d[i, c]
-                for j in range(4):
-                    li[j, lane], lf[j, lane] = column(lamu[i, j], top)
-                    thr[j, lane] = 1.0
-                    acc[j, lane] = 0.0
-                prev_pdf[lane] = 0.0
-                first_t[i] = MISS_DISTANCE
-            if path[lane] >= 0:
-                busy += 1
-        if busy == 0:
-            break
-        fill_packet(ray, path, hit, hitf, valid)
-        n_rays += busy
-        if record:
-            for c in range(6):
-                for lane in range(W):
-                    log_hit[packets, c, lane] = ray[c, lane]
-        intersect16(handle, valid, hit)
-        shade_hits(geo, mats, eps_base, max_depth, hit, hitf, lanes, bounce)
-        pick_lights(l_cdf, ua, pos)
-        sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce)
-        for lane in range(W):
-            n_sh += svalid[lane] != 0
-        if record:
-            for c in range(7):
-                for lane in range(W):
-                    log_shadow[packets, c, lane] = shadowf[_SHADOW_WORDS[c] * W + lane]
+            path[lane] = -1
+            alive[lane] = False
+        geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn)
+        mats = (refl, emit, emit_row, one_sided, tri_pmf, l_kind, l_prim, l_pos, l_dir, l_row,
+                l_scale, l_spot, l_cdf, sky_pmf, sky_row)
+        lanes = (path, key, depth, ray, thr, li, lf, acc, prev_pdf)
+        bounce = (pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive)
+        log_hit, log_shadow, log_valid = log
+        record = log_hit.shape[0] > 1
+        nxt = 0
+        packets = 0
+        n_rays = 0
+        n_sh = 0
+        while True:
+            # the lanes whose path ended take the next camera rays
+            busy = 0
             for lane in range(W):
-                log_valid[packets, 0, lane] = valid[lane]
-                log_valid[packets, 1, lane] = svalid[lane]
-        packets += 1
-        occluded16(handle, svalid, shadow)
-        add_unblocked(shadowf, svalid, nee, acc)
-        # the paths that ended give their radiance and, from the camera ray, its distance
-        for lane in range(W):
-            i = path[lane]
-            if i < 0:
-                continue
-            if depth[lane] == 1 and hit[GEOM * W + lane] != _INVALID:
-                first_t[i] = hitf[TFAR * W + lane]
-            if not alive[lane]:
-                for j in range(4):
-                    L[i, j] = acc[j, lane] if j < nlanes else 0.0
-                path[lane] = -1
-    return n_rays, n_sh, packets
+                if path[lane] < 0 and nxt < n_paths:
+                    i = nxt
+                    nxt += 1
+                    path[lane] = i
+                    key[lane] = keys[i]
+                    depth[lane] = 0
+                    for c in range(3):
+                        ray[c, lane] = o[i, c]
+                        ray[3 + c, lane] = d[i, c]
+                    for j in range(4):
+                        li[j, lane], lf[j, lane] = column(lamu[i, j], top)
+                        thr[j, lane] = 1.0
+                        acc[j, lane] = 0.0
+                    prev_pdf[lane] = 0.0
+                    first_t[i] = MISS_DISTANCE
+                if path[lane] >= 0:
+                    busy += 1
+            if busy == 0:
+                break
+            fill_packet(ray, path, hit, hitf, valid)
+            n_rays += busy
+            if record:
+                for c in range(6):
+                    for lane in range(W):
+                        log_hit[packets, c, lane] = ray[c, lane]
+            intersect16(handle, valid, hit)
+            shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce,
+                       smooth, general)
+            pick_lights(l_cdf, ua, pos)
+            sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general)
+            for lane in range(W):
+                n_sh += svalid[lane] != 0
+            if record:
+                for c in range(7):
+                    for lane in range(W):
+                        log_shadow[packets, c, lane] = shadowf[_SHADOW_WORDS[c] * W + lane]
+                for lane in range(W):
+                    log_valid[packets, 0, lane] = valid[lane]
+                    log_valid[packets, 1, lane] = svalid[lane]
+            packets += 1
+            occluded16(handle, svalid, shadow)
+            add_unblocked(shadowf, svalid, nee, acc)
+            # the paths that ended give their radiance and, from the camera ray, its distance
+            for lane in range(W):
+                i = path[lane]
+                if i < 0:
+                    continue
+                if depth[lane] == 1 and hit[GEOM * W + lane] != _INVALID:
+                    first_t[i] = hitf[TFAR * W + lane]
+                if not alive[lane]:
+                    for j in range(4):
+                        L[i, j] = acc[j, lane] if j < nlanes else 0.0
+                    path[lane] = -1
+        return n_rays, n_sh, packets
+
+    return lane_paths
+
+
+def kind(sc: KernelScene) -> tuple[bool, bool]:
+    """The scene's kind of lane kernel (:func:`_compile`): (vertex normals, lights other
+    than emissive triangles or a constant sky)."""
+    return (bool(sc.has_vn), bool(np.any(np.asarray(sc.l_kind) != lightmod.TRIANGLE))
+            or int(sc.sky_row) >= 0)
+
+
+#: the compiled variants, by (smooth, general) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, bool], Any] = {}
+_KERNELS_LOCK = threading.Lock()
+
+
+def kernel(smooth: bool, general: bool) -> Any:
+    """The lane kernel for scenes with or without vertex normals and with or without
+    lights other than emissive triangles (:func:`_compile`); made once per kind, also
+    when several render threads ask for it at once."""
+    key = (bool(smooth), bool(general))
+    with _KERNELS_LOCK:
+        if key not in _KERNELS:
+            _KERNELS[key] = _compile(*key)
+        return _KERNELS[key]
 
 
 #: no packet log (:func:`lane_paths`' ``log`` when nothing is recorded)
@@ -414,7 +491,8 @@ def packet_log(n_paths: int, max_depth: int) -> tuple:
 
 def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
                d: np.ndarray, lamu: np.ndarray, nlanes: int, max_depth: int, L: np.ndarray,
-               first_t: np.ndarray, log: tuple | None = None) -> tuple[int, int, int]:
+               first_t: np.ndarray, sky_seen: bool = True,
+               log: tuple | None = None) -> tuple[int, int, int]:
     """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
     ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
     its end through the scene ``sc`` (where :func:`applies`), sixteen at a time: its lab
@@ -422,23 +500,27 @@ def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
     ray's hit distance into ``first_t[i]`` (1e30: none). ``log`` (benchmarks,
     :func:`packet_log`): every packet's rays. Returns (nearest-hit rays, shadow rays,
     packets)."""
-    return lane_paths(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.tri_mat, sc.refl,
-                      sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_prim, sc.l_row,
-                      sc.l_scale, sc.l_cdf, sc.tri_pmf, float(sc.eps), keys, o, d, lamu,
-                      nlanes, max_depth, L, first_t, NO_LOG if log is None else log)
+    run = kernel(*kind(sc))
+    return run(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
+               sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
+               sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
+               sc.sky_pmf, sc.sky_row, float(sc.eps), keys, o, d, lamu, nlanes, max_depth,
+               sky_seen, L, first_t, NO_LOG if log is None else log)
 
 
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
+          sky_seen: bool = True,
           buffers: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`.whole_paths.trace` for a scene where :func:`applies`: (L (N, 4) lab
     radiance, the camera rays' hit distances (1e30: none), the moving segments they hit
     (all -1: the scene is static)), the arrays kept in ``buffers`` until its next use
     (:func:`.integrator.wavefront_buffers`). ``o_local``/``d`` float32 (N, 3) camera rays
-    in accelerator coordinates, ``lamu`` the lanes' table coordinates (N, 4)."""
+    in accelerator coordinates, ``lamu`` the lanes' table coordinates (N, 4); ``sky_seen``
+    False hides the sky from the camera rays (a transparent film)."""
     b = wavefront_buffers(len(keys), buffers, whole_paths.BUFFERS)
     b["seg"][:] = -1
     lane_trace(sc, accel, keys, np.ascontiguousarray(o_local, np.float32),
                np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-               nlanes, max_depth, b["L"], b["first_t"])
+               nlanes, max_depth, b["L"], b["first_t"], sky_seen)
     return b["L"], b["first_t"], b["seg"]
