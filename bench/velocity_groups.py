@@ -127,17 +127,18 @@ def noise_rows(spp: int, width: int, height: int, threads: int,
 def group_rows(spp: int, width: int, height: int, threads: int,
                repeat: int) -> list[dict[str, Any]]:
     """CPU seconds per spp per variant (medians of interleaved runs), and the ratio to
-    the static scene. The static box is rendered by the wavefront integrator here, as
-    the moving variants are, so the ratios are the velocity groups' cost like for like
-    (the renderer itself traces the static box as whole paths, render/whole_paths.py,
-    which moving scenes never take); so in :func:`pair_rows`."""
+    the static scene. The static box is traced one path at a time here
+    (render/whole_paths.py), as the moving variants are, so the ratios are the velocity
+    groups' cost like for like (the renderer itself traces the static box sixteen paths
+    at a time, render/lane_paths.py, which moving scenes do not take); so in
+    :func:`pair_rows`."""
     base = cm.RelrayBench(cm.make_job(cm.job_dict()))
     variants = {f"{n} groups": grouped_scene(base.scene, n) for n in COUNTS}
     variants["1 group: the tall box"] = grouped_scene(base.scene, 1, tall_box(base.scene))
     benches = {k: cm.RelrayBench(base.job, scene=s) for k, s in variants.items()}
     frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
            for k, b in benches.items()}
-    frs["0 groups"].whole_paths = False  # like for like: see group_rows' docstring
+    frs["0 groups"].lane_paths = False  # like for like: see group_rows' docstring
     images = {}
     for k, b in benches.items():
         b.render(renderer=frs[k])  # warm-up
@@ -174,7 +175,7 @@ def pair_rows(spp: int, width: int, height: int, threads: int,
                                                          scene=grouped_scene(base.scene, 1))}
     frs = {k: b.renderer(spp=spp, width=width, height=height, threads=threads)
            for k, b in benches.items()}
-    frs["static"].whole_paths = False  # like for like: see group_rows' docstring
+    frs["static"].lane_paths = False  # like for like: see group_rows' docstring
     for k, b in benches.items():
         b.render(renderer=frs[k])  # warm-up
     rows = []
