@@ -1,5 +1,5 @@
-"""The floor of a path's cost outside Embree: relray's whole-path kernel against its
-wavefront integrator and against Embree alone, on the same paths.
+"""The floor of a path's cost outside Embree: relray's SIMD lanes and whole-path kernel
+against its wavefront integrator and against Embree alone, on the same paths.
 
     .venv/bin/python -m relray.bench.path_floor [--scene cornell] [--size 128] [--spp 16]
                                                 [--reps 5]
@@ -12,7 +12,9 @@ scene and the environment-lit scene): each path traced to its end in one loop, E
 called from it, the state in registers, nothing but two-sided Lambert, the scene's
 lights (triangles, or the map), NEE + MIS, four hero lanes and roulette (that module's
 docstring). What it spends outside Embree is what a scalar kernel must spend on these
-paths.
+paths. :mod:`relray.core.render.lane_paths` computes the same estimator sixteen paths at
+a time in SIMD lanes, with Embree's 16-ray packets; the renderer runs it on the static
+scenes without a map (the Cornell box, the heavy scene).
 
 Measured in one process, on the same camera rays, keys and hero lanes (relray's camera
 and spectral stages, run once, outside the timing), each the fastest of ``reps`` runs
@@ -23,7 +25,11 @@ alternated, thread CPU time per path:
 - *whole paths*: ``whole_paths.lambert_paths``, what the renderer runs on these scenes;
 - *Embree*: Embree alone on the whole-path kernel's own rays (recorded in one more run,
   then traced again by ``embree.intersect_rays`` / ``occluded_rays`` in the same order);
-- *numbers*: the random numbers alone that those paths draw (:func:`draw_numbers`).
+- *numbers*: the random numbers alone that those paths draw (:func:`draw_numbers`);
+- where the lanes apply, *lanes*: ``lane_paths.lane_trace``, and *Embree16*: Embree
+  alone on the lane kernel's own packets (recorded in one more run, then traced again by
+  ``rtcIntersect16``/``rtcOccluded16`` in the same order, :func:`replay_packets`); the
+  lane kernel's work outside Embree is *lanes* − *Embree16*.
 
 The whole-path kernel's work outside Embree is *whole paths* − *Embree*. The two
 integrators compute the same radiance with the same random numbers: the mean of each
@@ -52,13 +58,13 @@ from relray.core.render.accel import MISS_DISTANCE
 from relray.core.render.embree import (
     GEOM,
     PACKET,
-    PACKET_WORDS,
-    PRIM,
     TFAR,
     intersect16,
     intersect_rays,
     occluded16,
     occluded_rays,
+    packet_buffers,
+    set_packet_ray,
 )
 from relray.core.render.integrator import FAST_MATH, RR_DEPTH, trace
 from relray.core.render.sampling import (
@@ -98,29 +104,15 @@ def replay_packets(scene, log_hit, log_shadow, log_valid, n):  # pragma: no cove
     the valid words they were traced with. Returns the hits found (so that nothing is
     left out)."""
     W = PACKET
-    raw = np.empty(PACKET_WORDS * W + 16, np.uint32)
-    off = (-raw.ctypes.data % 64) // 4
-    hit = raw[off:off + PACKET_WORDS * W]
-    f = hit.view(np.float32)
-    vraw = np.empty(W + 16, np.int32)
-    voff = (-vraw.ctypes.data % 64) // 4
-    valid = vraw[voff:voff + W]
+    hit, f, valid = packet_buffers()
     found = 0
     for k in range(n):
         for shadow in range(2):
+            log = log_shadow if shadow else log_hit
             for lane in range(W):
-                for c in range(3):
-                    f[c * W + lane] = log_shadow[k, c, lane] if shadow else log_hit[k, c, lane]
-                    f[(4 + c) * W + lane] = (log_shadow[k, 3 + c, lane] if shadow
-                                             else log_hit[k, 3 + c, lane])
-                f[3 * W + lane] = 0.0
-                f[7 * W + lane] = 0.0
-                f[TFAR * W + lane] = log_shadow[k, 6, lane] if shadow else MISS_DISTANCE
-                hit[9 * W + lane] = 0xFFFFFFFF
-                hit[10 * W + lane] = 0
-                hit[11 * W + lane] = 0
-                hit[PRIM * W + lane] = 0xFFFFFFFF
-                hit[GEOM * W + lane] = 0xFFFFFFFF
+                set_packet_ray(f, hit, lane, log[k, 0, lane], log[k, 1, lane], log[k, 2, lane],
+                               log[k, 3, lane], log[k, 4, lane], log[k, 5, lane],
+                               log_shadow[k, 6, lane] if shadow else MISS_DISTANCE)
                 valid[lane] = log_valid[k, shadow, lane]
             if shadow:
                 occluded16(scene, valid, hit)

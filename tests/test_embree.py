@@ -94,28 +94,14 @@ def test_robust_scenes_and_bad_input():
 def _packets(scene, o, d, lengths, valid_lanes, t, prim, blocked):
     """embree.intersect16/occluded16 over the rays, 16 to a packet, lane l of each
     packet traced only where ``valid_lanes[l]``."""
-    W, words = embree.PACKET, embree.PACKET_WORDS
-    raw = np.empty(words * W + 16, np.uint32)
-    off = (-raw.ctypes.data % 64) // 4
-    hit = raw[off:off + words * W]
-    f = hit.view(np.float32)
-    vraw = np.empty(W + 16, np.int32)
-    voff = (-vraw.ctypes.data % 64) // 4
-    valid = vraw[voff:voff + W]
+    W = embree.PACKET
+    hit, f, valid = embree.packet_buffers()
     for start in range(0, o.shape[0], W):
         for occl in range(2):
             for lane in range(W):
                 i = min(start + lane, o.shape[0] - 1)
-                for c in range(3):
-                    f[c * W + lane] = o[i, c]
-                    f[(4 + c) * W + lane] = d[i, c]
-                f[3 * W + lane] = 0.0
-                f[7 * W + lane] = 0.0
-                f[embree.TFAR * W + lane] = lengths[i] if occl else 1e30
-                hit[9 * W + lane] = 0xFFFFFFFF
-                hit[10 * W + lane] = 0
-                hit[11 * W + lane] = 0
-                hit[embree.GEOM * W + lane] = 0xFFFFFFFF
+                embree.set_packet_ray(f, hit, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
+                                      d[i, 1], d[i, 2], lengths[i] if occl else 1e30)
                 valid[lane] = -1 if valid_lanes[lane] and start + lane < o.shape[0] else 0
             if occl:
                 embree.occluded16(scene, valid, hit)

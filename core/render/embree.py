@@ -163,6 +163,32 @@ TFAR, PRIM, GEOM, HIT_U, HIT_V = _TFAR, _PRIM, _GEOM, _HIT_U, _HIT_V
 
 
 @njit(cache=True, nogil=True, inline="always")
+def set_packet_ray(f, u, lane, ox, oy, oz, dx, dy, dz, tfar):  # pragma: no cover - compiled
+    """Lane ``lane`` of an ``RTCRayHit16`` (or ``RTCRay16``; ``f``/``u`` its float32 and
+    uint32 views): origin, tnear 0, direction, time 0, tfar, every mask bit, id and
+    flags 0, no hit yet."""
+    W = PACKET
+    f[lane], f[W + lane], f[2 * W + lane], f[3 * W + lane] = ox, oy, oz, 0.0
+    f[4 * W + lane], f[5 * W + lane], f[6 * W + lane], f[7 * W + lane] = dx, dy, dz, 0.0
+    f[_TFAR * W + lane] = tfar
+    u[_MASK * W + lane], u[(_MASK + 1) * W + lane], u[(_MASK + 2) * W + lane] = _INVALID, 0, 0
+    u[_PRIM * W + lane], u[_GEOM * W + lane] = _INVALID, _INVALID
+
+
+@njit(cache=True, nogil=True)
+def packet_buffers():  # pragma: no cover - compiled
+    """A fresh ``RTCRayHit16`` and its valid words, aligned to 64 bytes on the heap: (its
+    uint32 view, its float32 view, the int32 valid words) (benchmarks, tests; the lane
+    kernel keeps its packets on its stack)."""
+    raw = np.empty(PACKET_WORDS * PACKET + 16, np.uint32)
+    off = (-raw.ctypes.data % 64) // 4
+    u = raw[off:off + PACKET_WORDS * PACKET]
+    vraw = np.empty(PACKET + 16, np.int32)
+    voff = (-vraw.ctypes.data % 64) // 4
+    return u, u.view(np.float32), vraw[voff:voff + PACKET]
+
+
+@njit(cache=True, nogil=True, inline="always")
 def intersect16(scene, valid, packet):  # pragma: no cover - compiled
     """``rtcIntersect16`` of the lanes whose ``valid`` word is -1 (int32 (16,)) through the
     ``RTCRayHit16`` ``packet`` (uint32 (16 · PACKET_WORDS,); both aligned to 64 bytes):

@@ -3,25 +3,40 @@
 :mod:`.whole_paths` traces one path at a time, so its shading is scalar code and every
 ray an ``rtcIntersect1``/``rtcOccluded1``. Here sixteen paths share one loop: each lane
 holds a path's state (structure of arrays, one row per quantity, one column per lane),
-every bounce of the sixteen is one ``rtcIntersect16`` packet, their shading one loop over
-the lanes that LLVM compiles to vector code (branch-free: a lane's decisions are
-selects and masks), their shadow rays one ``rtcOccluded16`` packet; a lane whose path has
-ended takes the next camera ray from the queue before the next packet. This is what
-Mitsuba 3's LLVM variant does with its JIT-compiled kernels, written out for the
-scenes where it pays most (:func:`applies`): static, Lambert, lit by emissive triangles,
-flat-shaded, without textures, environment map or sky.
+every bounce of the sixteen is one ``rtcIntersect16`` packet, their shading a few loops
+over the lanes that LLVM compiles to vector code for the machine it runs on (on this
+AVX-512 machine 16-lane zmm code: gathers from the scene's tables, the Sobol numbers'
+integer hashing, the light sample, the cosine warp; branch-free, a lane's decisions are
+selects and masks), their shadow rays one
+``rtcOccluded16`` packet; a lane whose path has ended takes the next camera ray from the
+queue before the next packet. This is what Mitsuba 3's LLVM variant does with its
+JIT-compiled kernels, written out by hand for the scenes where it pays
+(:func:`applies`): static, Lambert, flat or smooth-shaded, lit by emissive triangles,
+point, spot and sun lights or a constant sky, without image textures or an environment
+map (their lookups are libm and table searches that stay scalar: an environment-lit
+scene traced in lanes cost 1.00× its whole paths, so it keeps them).
+
+What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
+(:func:`_stack`, no owner and no reference counting), so LLVM knows that nothing the
+loops write aliases the scene's tables they read (with heap arrays it found "unsafe
+dependent memory operations" and vectorised nothing); each loop is a function inlined
+into the kernel (:data:`_LANES`), with fewer than 30 arguments (Python 3.11 passes more
+as ``*args``, which numba cannot inline); its code is one straight run of selects
+(:func:`.sampling.sincos_2pi`'s quadrant, :func:`.lights.sample_triangle`).
 
 The estimator is :func:`.whole_paths.lambert_paths`', sample for sample (the same random
 numbers, light selection, offsets and table lookups; that module's docstring): at a hit
 the emission of a front face (or a two-sided emitter) times the throughput, with the
-power heuristic against next-event estimation except for the camera ray; next-event
-estimation towards an emissive triangle picked by the light CDF
-(:func:`.lights.sample_triangle`; contribution thr ρ/π cos θ_i w L_e / p_light,
-w = p_light² / (p_light² + p_bsdf²)); the continuation cosine-weighted about the
-geometric normal, throughput × ρ(λ); Russian roulette from ``integrator.RR_DEPTH`` on the
-lanes' largest throughput. ``tests/test_lane_paths.py`` checks path by path that the two
-kernels give the same radiance; ``bench/path_floor.py`` measures them against Embree's
-own cost.
+power heuristic against next-event estimation except for the camera ray; a ray that
+escapes sees the constant sky (MIS against NEE towards it; not the camera ray on a
+transparent film); next-event estimation towards a light picked by the light CDF
+(:func:`.lights.sample_light`; contribution thr ρ/π cos θ_i w L_e / p_light,
+w = p_light² / (p_light² + p_bsdf²), 1 for a delta light); the continuation
+cosine-weighted about the shading normal n (refused below the geometric normal g),
+throughput × ρ(λ); Russian roulette from ``integrator.RR_DEPTH`` on the lanes' largest
+throughput. ``tests/test_lane_paths.py`` checks path by path that the lanes, the
+whole-path kernel and the wavefront integrator give the same radiance;
+``bench/path_floor.py`` measures the lanes against Embree alone on their packets.
 """
 
 from __future__ import annotations
@@ -50,6 +65,7 @@ from .embree import (
     TFAR,
     intersect16,
     occluded16,
+    set_packet_ray,
 )
 from .integrator import (
     FAST_MATH,
@@ -135,17 +151,8 @@ def fill_packet(ray, path, hit, hitf, valid):  # pragma: no cover - compiled
     """The ``RTCRayHit16`` of the lanes' rays (``ray``: origin, direction rows), tnear 0,
     tfar 1e30, no hit yet; a lane without a path left out (valid 0)."""
     for lane in range(valid.shape[0]):
-        for c in range(3):
-            hitf[c * W + lane] = ray[c, lane]
-            hitf[(4 + c) * W + lane] = ray[3 + c, lane]
-        hitf[3 * W + lane] = 0.0
-        hitf[7 * W + lane] = 0.0
-        hitf[TFAR * W + lane] = MISS_DISTANCE
-        hit[9 * W + lane] = _INVALID
-        hit[10 * W + lane] = 0
-        hit[11 * W + lane] = 0
-        hit[PRIM * W + lane] = _INVALID
-        hit[GEOM * W + lane] = _INVALID
+        set_packet_ray(hitf, hit, lane, ray[0, lane], ray[1, lane], ray[2, lane],
+                       ray[3, lane], ray[4, lane], ray[5, lane], MISS_DISTANCE)
         valid[lane] = -1 if path[lane] >= 0 else 0
 
 
@@ -279,18 +286,11 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce,
         ox, oy, oz = px + gx * ep, py + gy * ep, pz + gz * ep
         sx, sy, sz = target[0] - ox, target[1] - oy, target[2] - oz
         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
-        shadowf[lane] = np.float32(ox)
-        shadowf[W + lane] = np.float32(oy)
-        shadowf[2 * W + lane] = np.float32(oz)
-        shadowf[3 * W + lane] = 0.0
-        shadowf[4 * W + lane] = np.float32(sx / sl if finite else wx)
-        shadowf[5 * W + lane] = np.float32(sy / sl if finite else wy)
-        shadowf[6 * W + lane] = np.float32(sz / sl if finite else wz)
-        shadowf[7 * W + lane] = 0.0
-        shadowf[TFAR * W + lane] = np.float32(sl * (1.0 - 1e-4) if finite else 1e30)
-        shadow[9 * W + lane] = _INVALID
-        shadow[10 * W + lane] = 0
-        shadow[11 * W + lane] = 0
+        set_packet_ray(shadowf, shadow, lane, np.float32(ox), np.float32(oy), np.float32(oz),
+                       np.float32(sx / sl if finite else wx),
+                       np.float32(sy / sl if finite else wy),
+                       np.float32(sz / sl if finite else wz),
+                       np.float32(sl * (1.0 - 1e-4) if finite else 1e30))
         svalid[lane] = -1 if go else 0
         lrow = l_row[k]
         q = 0.0
