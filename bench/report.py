@@ -282,11 +282,17 @@ def headline(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
         share = t["embree_share"] + (shadow_embree_ns(d) or 0.0) * t["paths"] / (
             1e9 * t["cpu_s"])
         how = "shadow rays inside the shade kernel estimated"
-        if any(r["stage"].startswith("whole-path kernel") and r["seconds"] > 0
+        pf = [r for r in d["path_floor"] if r["scene"] == "cornell"]
+        if any(r["stage"].startswith("lane-path kernel") and r["seconds"] > 0
                for r in d["profile"]):
+            # SIMD lanes: every Embree query is inside the lane kernel; §6 measures Embree
+            # alone on the kernel's own packets
+            share = pf[0]["lanes_embree_share"] if pf else float("nan")
+            how = "SIMD lanes: Embree alone on the lane kernel's packets, §6"
+        elif any(r["stage"].startswith("whole-path kernel") and r["seconds"] > 0
+                 for r in d["profile"]):
             # whole paths: every Embree query is inside the kernel; §6 measures Embree
             # alone on the kernel's own rays
-            pf = [r for r in d["path_floor"] if r["scene"] == "cornell"]
             share = pf[0]["whole_embree_share"] if pf else float("nan")
             how = "whole paths: Embree alone on the kernel's rays, §6"
         rows.append({"goal": f"Embree's share of the CPU time ({how})", "target": "≥ 50 %",
@@ -1452,6 +1458,17 @@ def _section_moving(add, d) -> None:
             "swings by ±0.15 from run to run on this shared machine. The static path pays "
             "nothing for moving objects (a scene without them never builds a "
             "`MovingScene`, and nothing is pending on its paths).\n")
+    add("Like for like, both sides here are traced one path at a time "
+        "(`render/whole_paths.py`; the static box with `FrameRenderer.lane_paths` off): "
+        "the renderer itself traces the static box in SIMD lanes (`render/lane_paths.py`, "
+        "§6), which moving scenes do not take, so against what it really runs for the "
+        "static box a moving group costs more (§6's per-scene profile: the moving column "
+        "against the Cornell column). **Correction**: from 2026-11-26 14:07 this "
+        "benchmark's static box was set to the wavefront integrator, like the moving "
+        "scenes were then; when moving scenes took whole paths (21:00) it stayed there, "
+        "so the 1.17× (quartiles 1.15–1.19) and 1.40× (four groups) of the run at 21:09 "
+        "compared moving whole paths with the static wavefront, not like for like. The "
+        "figures above are this run's, both sides as whole paths.\n")
     add("A Lambert scene with moving bodies is traced as whole paths "
         "(`render/whole_paths.py`, since 2026-11-26 21:00; §6); the wavefront integrator "
         "takes the others (glossy or glass lobes, alpha masks, area-light quads, the "
@@ -1571,63 +1588,100 @@ def _section_path_floor(add, d) -> None:
     if not rows:
         return
     r0 = rows[0]
-    add(f"### Whole paths, and the floor they show\n\n`.venv/bin/python -m "
+    add(f"### SIMD lanes, whole paths, and the floor they show\n\n`.venv/bin/python -m "
         f"relray.bench.path_floor --scene S --size {r0['size']:.0f} --spp {r0['spp']:.0f}` "
         "(`bench/results/path_floor.csv`; the `profiles` section of `make bench`). The "
         "Cornell box, the heavy scene and the environment-lit scene are static and "
-        "Lambert, so the renderer traces them as whole paths in one kernel call "
-        "(`render/whole_paths.py`: each path to its end in one loop, Embree called from it, "
-        "its state in registers). On the same camera rays, keys and hero lanes, one thread, "
-        f"thread CPU ns per path, the fastest of {r0['reps']:.0f} alternated runs: the "
-        "wavefront integrator (`integrator.trace`, which the renderer runs where whole "
-        "paths do not apply: glossy or glass lobes, alpha masks, area-light "
-        "quads, denoising features), the whole-path kernel, Embree alone on the "
-        "whole-path kernel's own rays (recorded, then traced again in the same order), and "
-        "the random numbers alone that "
-        "those paths draw. The two integrators compute the same estimator with the same "
-        "random numbers: the share of paths whose radiance differs by more than 1e-4 "
-        "relative, and the largest difference of a lane's mean in standard errors, are in "
-        "the last rows.\n")
+        "Lambert, so the renderer traces them as whole paths (`render/whole_paths.py`: each "
+        "path to its end in one loop, Embree called from it, its state in registers); the "
+        "first two, which have no map, sixteen at a time in SIMD lanes "
+        "(`render/lane_paths.py`: the same estimator, the lanes' state as structure of "
+        "arrays on the kernel's stack, their shading compiled to 16-lane vector code, "
+        "their rays in Embree's 16-ray packets). On the same camera rays, keys and hero "
+        f"lanes, one thread, thread CPU ns per path, the fastest of {r0['reps']:.0f} "
+        "alternated runs: the wavefront integrator (`integrator.trace`, which the renderer "
+        "runs where whole paths do not apply: glossy or glass lobes, alpha masks, "
+        "area-light quads, denoising features), the whole-path kernel, the lane kernel, "
+        "Embree alone on each kernel's own rays (recorded, then traced again in the same "
+        "order: one ray at a time for the whole paths, the same packets for the lanes), "
+        "and the random numbers alone that those paths draw. The integrators compute the "
+        "same estimator with the same random numbers: the share of paths whose radiance "
+        "differs by more than 1e-4 relative, and the largest difference of a lane's mean "
+        "in standard errors, are in the last rows.\n")
     by = {r["scene"]: r for r in rows}
     names = [n for n in ("cornell", "heavy", "environment") if n in by]
+
+    def ratio(a: str, b: str):
+        return lambda r: r.get(a, float("nan")) / r[b] if r.get(a) not in (None, "") \
+            else float("nan")
+
     lines = [("wavefront integrator", "wavefront_ns", ".0f"),
-             ("**whole-path kernel**", "whole_ns", ".0f"),
-             ("whole paths ÷ wavefront", lambda r: r["whole_ns"] / r["wavefront_ns"], ".2f"),
-             ("Embree alone, on the whole-path kernel's rays", "embree_ns", ".0f"),
+             ("whole-path kernel", "whole_ns", ".0f"),
+             ("**lane kernel (16 paths in SIMD lanes)**", "lanes_ns", ".0f"),
+             ("whole paths ÷ wavefront", ratio("whole_ns", "wavefront_ns"), ".2f"),
+             ("lanes ÷ whole paths", "lanes_over_whole", ".2f"),
+             ("Embree alone, on the whole-path kernel's rays (1 ray a query)", "embree_ns",
+              ".0f"),
+             ("Embree alone, on the lane kernel's packets (16 rays a query)", "embree16_ns",
+              ".0f"),
              ("whole-path kernel outside Embree", "whole_other_ns", ".0f"),
-             ("… of which the random numbers", "numbers_ns", ".0f"),
+             ("**lane kernel outside Embree**", "lanes_other_ns", ".0f"),
+             ("… the random numbers alone, one path at a time", "numbers_ns", ".0f"),
              ("wavefront integrator outside Embree", "wavefront_other_ns", ".0f"),
-             ("Embree share of the whole-path kernel %",
-              lambda r: 100 * r["whole_embree_share"], ".0f"),
              ("Embree share of the wavefront integrator %",
               lambda r: 100 * r["wavefront_embree_share"], ".0f"),
-             ("outside Embree ÷ Embree, whole paths (goal ≤ 0.67 / 0.43)",
-              lambda r: r["whole_other_ns"] / r["embree_ns"], ".2f"),
+             ("Embree share of the whole-path kernel %",
+              lambda r: 100 * r["whole_embree_share"], ".0f"),
+             ("**Embree share of the lane kernel %** (goal ≥ 60 / 70)",
+              lambda r: 100 * r["lanes_embree_share"], ".0f"),
+             ("outside Embree ÷ Embree, lanes (goal ≤ 0.67 / 0.43)",
+              ratio("lanes_other_ns", "embree16_ns"), ".2f"),
+             ("rays per packet of the lanes (of 16)", "lanes_per_packet", ".2f"),
              ("nearest-hit / shadow rays per path",
               lambda r: f"{r['rays_per_path']:.2f} / {r['shadow_rays_per_path']:.2f}", ""),
-             ("paths whose radiance differs", "paths_differing", ".4f"),
+             ("paths whose radiance differs, whole paths against the wavefront",
+              "paths_differing", ".4f"),
+             ("paths whose radiance differs, lanes against whole paths",
+              "lanes_paths_differing", ".4f"),
              ("largest lane-mean difference (standard errors)", "agreement_z", ".1e"),
              ("load average", "load", ".2f")]
     add("| ns of CPU per path | " + " | ".join(names) + " |\n|---|" + "---|" * len(names))
     for label, key, fmt in lines:
-        cells = [_f(key(by[n]) if callable(key) else by[n][key], fmt) for n in names]
+        cells = [_f(key(by[n]) if callable(key) else by[n].get(key), fmt) for n in names]
         add(f"| {label} | " + " | ".join(cells) + " |")
     c = by.get("cornell", r0)
-    add(f"\nThe whole-path kernel is the floor of a scalar kernel on these paths: it does "
-        "only what the estimator needs (its module docstring), yet outside Embree it spends "
-        f"{c['whole_other_ns']:.0f} ns per Cornell path against Embree's "
-        f"{c['embree_ns']:.0f}, {c['numbers_ns']:.0f} ns of it drawing the Owen-scrambled "
-        "Sobol numbers, the rest the four lanes' table lookups, the light sample, the "
-        "shadow ray's and the continuation's set-up and the ray offsets, one path at a "
-        "time. Embree's share of its time is "
-        f"{100 * c['whole_embree_share']:.0f} % on the box"
-        + (f" and {100 * by['heavy']['whole_embree_share']:.0f} % on the heavy scene"
-           if "heavy" in by else "")
-        + " (goals 60 % and 70 %): no scalar kernel reaches them. What would is what "
-        "Mitsuba's LLVM variant does: the shading of 8 or 16 paths at once in SIMD lanes "
-        "(and the numbers with them), Embree's packet queries (`rtcIntersect8/16`) for the "
-        "rays of those lanes. numba does not vectorise a loop that calls Embree and whose "
-        "paths diverge, so that needs the lanes written out as structure-of-arrays code.\n")
+    if _num(c.get("lanes_ns")):
+        h = by.get("heavy", {})
+        add(f"\nIn SIMD lanes a Cornell path costs {c['lanes_ns']:.0f} ns against "
+            f"{c['whole_ns']:.0f} one path at a time ({c['lanes_over_whole']:.2f}×): Embree's "
+            f"16-ray packets {c['embree16_ns']:.0f} ns against {c['embree_ns']:.0f} for "
+            f"single rays, the shading {c['lanes_other_ns']:.0f} ns against "
+            f"{c['whole_other_ns']:.0f}. Embree's share of the lane kernel is "
+            f"{100 * c['lanes_embree_share']:.0f} % on the box"
+            + (f" and {100 * h['lanes_embree_share']:.0f} % on the heavy scene"
+               if _num(h.get("lanes_embree_share")) else "")
+            + " (goals 60 % and 70 %). What stays outside Embree is gathers: each hit "
+            "reads its triangle (vertex, edges, normal, area, light pmf, material: seven "
+            "tables) and eight columns of the reflectance and emission tables per lane, "
+            "scattered over memory on the heavy scene (its 1 M triangles miss the caches: "
+            "outside Embree a heavy path costs "
+            + (f"{h['lanes_other_ns']:.0f} ns against the box's {c['lanes_other_ns']:.0f}"
+               f", and {h['whole_other_ns']:.0f} ns one path at a time: there the lanes "
+               f"gain in Embree alone, its packets {h['embree16_ns']:.0f} ns against "
+               f"{h['embree_ns']:.0f}, so Embree's share falls"
+               if _num(h.get("lanes_other_ns")) else "more than the box's")
+            + "); the lanes' refill from the queue and the radiance written back are "
+            "scalar. A packed record per triangle (one cache line instead of seven tables) "
+            "cut the heavy scene's lanes by 6 % by hand (next steps). The environment-lit "
+            "scene keeps whole paths: its map's lookups "
+            "(`atan2`/`acos` of every escaping ray, the sampler's binary searches and "
+            "trigonometry, the texels) are libm calls and searches that stay scalar, and "
+            "traced in lanes it cost 1.00× its whole paths (by hand, 2026-11-26 23:35).\n")
+
+
+def _num(v: Any) -> bool:
+    """Whether ``v`` is a finite number (a CSV cell that was measured)."""
+    return isinstance(v, (int, float)) and math.isfinite(v)
 
 
 def _section_profile_scenes(add, d) -> None:
@@ -1697,6 +1751,50 @@ def _section_recommendations(add, d) -> None:
     emb_o = shadow_embree_ns(d) or 0.0
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
+    lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    if lane_rows:
+        c = lane_rows.get("cornell", next(iter(lane_rows.values())))
+        per = "; ".join(
+            f"{n} {r['lanes_ns']:.0f} against {r['whole_ns']:.0f} ns "
+            f"({r['lanes_over_whole']:.2f}×), Embree's share "
+            f"{100 * r['lanes_embree_share']:.0f} % (whole paths "
+            f"{100 * r['whole_embree_share']:.0f} %)" for n, r in lane_rows.items())
+        add("- **Paths in SIMD lanes** (`render/lane_paths.py`, 2026-11-26 23:30; last "
+            "round's next step 1): a static Lambert scene without an environment map or "
+            "image textures, with a light to sample (emissive triangles, point, spot, sun "
+            "lights, a constant sky; flat or smooth-shaded) is traced sixteen paths at a "
+            "time. Each lane holds a path's state in structure-of-arrays rows on the "
+            "kernel's own stack; every bounce of the sixteen is one `rtcIntersect16` "
+            "packet, their shading a few loops over the lanes that LLVM compiles to 16-lane "
+            "AVX-512 code (gathers from the scene's tables, the Sobol hashing in 64-bit "
+            "integer vectors, the light sample and the cosine warp as selects), their "
+            "shadow rays one `rtcOccluded16` packet; a lane whose path ends takes the next "
+            "camera ray, so the packets stay full "
+            f"({c['lanes_per_packet']:.2f} rays of 16 on the box). What it took: numba "
+            "vectorised nothing while the lanes' arrays were on the heap (LLVM could not "
+            "rule out that the loops' stores alias the scene's tables they gather from: "
+            "\"unsafe dependent memory operations\"), so the lanes' arrays are stack "
+            "memory made by a numba intrinsic (`lane_paths._stack`: no owner, no reference "
+            "counting, so the kernel compiles with `_nrt=False`); the loops are inlined "
+            "functions of fewer than 30 arguments (Python 3.11 passes more as `*args`, "
+            "which numba's inliner refuses); `sincos_2pi`'s quadrant and the triangle "
+            "light's sample became selects (images bit-identical). The estimator is the "
+            "whole-path kernel's, sample for sample: `tests/test_lane_paths.py` checks path "
+            "by path against it and the wavefront (flat and smooth, triangle, delta and "
+            "sky lights, a transparent film, depth 1–8, spectral and rgb, β 0–0.6), and "
+            "`tests/test_embree.py` the packets against single rays. The compiled kernel "
+            "comes in four kinds (flat or smooth, triangle lights or any), each compiled "
+            "once (about 10 s; the warm-up renders each). §6, on the same paths, one "
+            f"thread: {per}. The renderer's CPU per path against the code before it "
+            "(`python -m relray.bench.ab 93e0ad9 --scene S`, 6 alternated pairs, 128², 16 "
+            "spp, 1 thread, 2026-11-26 23:36–23:40): Cornell **0.80×** (quartiles "
+            "0.79–0.81; 836 → 668 ns), heavy (1 M triangles) **0.89×** (0.86–0.92; 1258 → "
+            "1134 ns). Tried and dropped: the environment-lit scene in lanes (its map's "
+            "lookups are libm and searches that stay scalar: 1.00× its whole paths, by "
+            "hand); a packed 64-byte record per triangle for the hit's gathers (one cache "
+            "line instead of seven tables): the heavy scene (200 k triangles) 0.84× its "
+            "whole paths against 0.91× (by hand, 23:41), for 64 bytes more per triangle "
+            "(83 MB on the 1.3 M-triangle mesh).")
     if pfc:
         ratios = ", ".join(f"{n} {r['whole_ns'] / r['wavefront_ns']:.2f}"
                            for n, r in pfc.items())
@@ -1750,8 +1848,11 @@ def _section_recommendations(add, d) -> None:
         "relray.bench.ab 5868059 --scene moving`, the room as one body, 6 alternated "
         "pairs, 128², 16 spp, 1 thread): **0.89×** (quartiles 0.86–0.90); the room as "
         "four bodies (the peer scene), alternated by hand: 0.88× and 0.91×. §5b's paired "
-        "statistic, one group against the static box: **1.17×** (quartiles 1.15–1.19; "
-        "1.29× at 18:01); four groups 1.40× (1.66×). The static scenes are unchanged "
+        "statistic, one group against the static box, was given as 1.17× (quartiles "
+        "1.15–1.19; four groups 1.40×), but that run's static box was on the wavefront "
+        "(§5b's correction); like for like, both as whole paths, it is **1.41×** "
+        "(1.40–1.43, 41 pairs, 2026-11-26 23:43; four groups 1.85× in the table) — issue "
+        "10's ≤ 1.35× is not met. The static scenes are unchanged "
         "(`bench/ab.py` against 5868059, 6–8 pairs: Cornell 1.00, quartiles 0.99–1.03; "
         "environment-lit 1.03, 0.99–1.12; textured 1.02, 0.98–1.08), and so is their "
         "kernel's compile time (the moving blocks are pruned by the compile-time flag: "
@@ -1783,8 +1884,9 @@ def _section_recommendations(add, d) -> None:
         "`scalar_spectral` 0.72 / 0.89, Cycles 0.37 / 0.36; on this session's AVX-512 "
         "machine at 21:09 (whole paths): 2.22 / 2.21, 0.74 / **0.67**, **0.33 / 0.31** "
         "(next bullet for why the LLVM ratios rose on every scene). Not met against "
-        "either Mitsuba variant: the rest-frame traversal of each body (§5b: one group "
-        "1.17× the static box, four groups 1.40×), on top of the static box's own gap.")
+        "either Mitsuba variant: the rest-frame traversal of each body (§5b, like for like: one "
+        "group 1.41× the static box, four groups 1.85×), on top of the static box's own "
+        "gap.")
     add("- **The CPU changed under the benchmarks** (2026-11-26 21:00): this session's "
         "machine (AMD EPYC, 2 cores) has AVX-512, the earlier sessions' had AVX2. "
         "Mitsuba's `llvm_ad_spectral` JIT-compiles its kernels for the machine it runs "
@@ -1796,8 +1898,12 @@ def _section_recommendations(add, d) -> None:
         "machine 0.88 / 0.68, 0.96 / 0.84, 0.64 / 0.46, 1.48 / 1.75), while those "
         "against `scalar_spectral` and Cycles, which do not widen, stayed within the "
         "runs' noise: heavy 0.49 / 0.42 and 0.20 / 0.21, environment-lit 0.46 / 0.38 and "
-        "0.29 / 0.23, textured 0.29 / 0.21 and 0.19 / 0.14. Only paths in SIMD lanes "
-        "(next steps, 1) would follow the LLVM variant there.")
+        "0.29 / 0.23, textured 0.29 / 0.21 and 0.19 / 0.14. Paths in SIMD lanes (the "
+        "first bullet) follow the LLVM variant there for the box and the heavy scene: in "
+        "the runs of 23:47–00:05, at equal relative MSE, high / low level, the Cornell "
+        "box 1.00 / 0.88 against `llvm_ad_spectral` and the heavy scene 0.98 / 0.93 (§2); "
+        "the environment-lit, textured and moving scenes, which the lanes do not take "
+        "yet, stay above 1.")
     add("- **The environment-lit scene's ΔE00 against Mitsuba, explained**: at equal "
         "relative MSE, relray needed more time than Mitsuba's LLVM variant to reach equal "
         "mean ΔE00 on that scene (1.21 / 1.59 in the 15:56 run), that is more colour "
@@ -1871,7 +1977,19 @@ def _section_recommendations(add, d) -> None:
         "`bench/moving_rays.py` measures one ray's cost in a moving scene; the stage "
         "meter counts a moving scene's rays again (an argument index had gone stale).\n")
     pf = {r["scene"]: r for r in d["path_floor"]}
-    if "cornell" in pf:
+    if "cornell" in pf and _num(pf["cornell"].get("lanes_ns")):
+        c = pf["cornell"]
+        add(f"**Where a Cornell path's {c['lanes_ns']:.0f} ns go** (the lane kernel, §6): "
+            f"Embree alone on its packets {c['embree16_ns']:.0f} ns "
+            f"({100 * c['lanes_embree_share']:.0f} %); outside Embree "
+            f"{c['lanes_other_ns']:.0f} ns for the sixteen lanes' gathers of the hit's "
+            "triangle and of the spectral tables, the numbers, the light sample, the "
+            "packets' set-up and the scalar refill and write-back. Around the kernel the "
+            f"camera rays and hero wavelengths cost {_ns(d, 'camera:', 'hero:'):.0f} ns and "
+            f"the film {_ns(d, 'film:'):.0f} ns per path (§6's profile). One path at a time "
+            f"the same paths cost {c['whole_ns']:.0f} ns ({c['whole_other_ns']:.0f} outside "
+            f"Embree), in the wavefront integrator {c['wavefront_ns']:.0f} ns.\n")
+    elif "cornell" in pf:
         c = pf["cornell"]
         add(f"**Where a Cornell path's {c['whole_ns']:.0f} ns go** (the whole-path kernel, "
             "§6): Embree alone on its rays "
@@ -1890,18 +2008,20 @@ def _section_recommendations(add, d) -> None:
             f"wavelengths {_ns(d, 'camera:', 'hero:'):.0f} ns; the film "
             f"{_ns(d, 'film:'):.0f} ns.\n")
     add("Next steps, by expected gain:\n")
-    add("1. **Paths in SIMD lanes** (the only way to the Embree-share goals, §6 \"Whole "
-        "paths, and the floor they show\"): 8 paths per kernel iteration in "
-        "structure-of-arrays lanes, the random numbers and the shading computed for all "
-        "8 at once, Embree's `rtcIntersect8`/`rtcOccluded8` for their rays, lanes that "
-        "finish refilled from the queue: what Mitsuba's LLVM variant does, written out by "
-        "hand because numba does not vectorise a loop that calls Embree. The gain would "
-        "come from the shading, not from Embree: on incoherent rays its packet queries "
-        "barely pay (262 144 random rays inside the box, thread CPU ns per ray, best of 5, "
-        "2026-11-26 21:50, AVX-512, with other work on the second core: Cornell "
-        "`rtcIntersect1` 90.9, `rtcIntersect8` 77.4, `rtcIntersect16` 76.8; heavy 170.9, "
-        "172.4, 167.2; a /tmp experiment).")
-    add("2. **The environment map's lookups** (the environment-lit scene, 0.47 of "
+    add("1. **SIMD lanes for the other kinds of scene**: image textures (the texel "
+        "lookups as gathers: the atlas descriptors, the mip level, four texels and their "
+        "spectral upsampling per lane), moving bodies (each body's rest-frame rays as a "
+        "packet of its own, the frame changes as lane arithmetic) and the environment "
+        "map (its `atan2`/`acos` and the sampler's searches need vector forms first: "
+        "polynomial arcs as `sincos_2pi` has, a guide table for the CDFs); then the "
+        "textured, moving and environment-lit scenes would follow the box.")
+    add("2. **A packed record per triangle for the lanes' hit gathers** (the heavy "
+        "scene): vertex, edges, normal, area, light pmf and material in one 64-byte row "
+        "instead of seven tables, one cache miss per hit instead of up to seven; by hand "
+        "(2026-11-26 23:41, 200 k triangles) the lane kernel 0.84× its whole paths "
+        "against 0.91×, for 64 bytes more per triangle unless the row replaces the "
+        "tables (the wavefront and whole-path kernels read them too).")
+    add("3. **The environment map's lookups** (the environment-lit scene, 0.46 of "
         "`scalar_spectral`'s equal-error time at the high level, goal 0.4): perf on the "
         "whole-path kernel shows its time outside Embree in the map's texel loads (cache "
         "misses: a miss after a bounce looks up a random texel of the 512 KB table and "
@@ -1909,19 +2029,19 @@ def _section_recommendations(add, d) -> None:
         "light sample (about 15 % of its samples in libm), and the two binary searches of "
         "the sampler; a guide table for the CDFs (as the wavelength sampler has) and a "
         "float32 conditional CDF would shorten the last two.")
-    add("3. **The bodies' rest-frame traversal** (the moving scene): each body's rays "
+    add("4. **The bodies' rest-frame traversal** (the moving scene): each body's rays "
         "are boosted and traced in its own BVH, one `rtcIntersect1` per body and ray "
         "(an `rtcIntersect8` packet over one masked scene is slower, above); a tighter "
         "bound than the bounding sphere per body (a box in its rest frame) would skip "
         "more of them where bodies are small, and a shadow ray from a moving vertex could "
         "use its rest-frame form for its own body (one boost less).")
-    add("4. **Whole paths for glossy and glass materials**: the principled material's "
+    add("5. **Whole paths for glossy and glass materials**: the principled material's "
         "other lobes as branches of the whole-path kernel (the wavefront stays for alpha "
         "masks, area-light quads and the denoising features).")
-    add("5. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
+    add("6. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
         f"`Film.add_samples`, {_ns(d, 'film:'):.0f} ns per path): one pass, no (N, 3) "
         "array.")
-    add("6. **Cheaper random numbers**: `sobol2`'s bit reversals as LLVM's `bitreverse` "
+    add("7. **Cheaper random numbers**: `sobol2`'s bit reversals as LLVM's `bitreverse` "
         "intrinsic (a few % of the numbers' cost).")
     add("")
 
