@@ -127,6 +127,28 @@ def distances_differing(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(np.abs(a - b) > 1e-5 * np.maximum(np.abs(a), np.abs(b))))
 
 
+@pytest.mark.parametrize("n", [1, 5, 15, 17])
+def test_fewer_paths_than_lanes(tmp_path, n):
+    """A chunk of fewer paths than the 16 lanes (or one more): the lanes that never get a
+    path run through the lane loops with defined state (uninitialised table columns
+    crashed the stress suite's 1-pixel render) and the paths that exist are traced as
+    whole paths trace them."""
+    fr, ev = renderer(lane_scene("everything", "cie1931", 0.0), tmp_path)
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
+    pick = np.linspace(0, len(keys) - 1, n).astype(np.int64)
+    keys, o, d, lamu = keys[pick], o[pick], d[pick], np.ascontiguousarray(lamu[pick])
+    depth = fr.settings.max_depth
+    L1, t1 = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32)
+    n_rays, _, packets = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
+                                               nlanes, depth, L1, t1)
+    L2, t2 = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
+    rays2 = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
+                                      np.zeros(n, np.float32), nlanes, depth, True, L2, t2)
+    assert np.all(np.isfinite(L1))
+    assert whole_paths.paths_differing(L1, L2) == 0.0 and n_rays == rays2[0]
+    assert distances_differing(t1, t2) == 0.0 and packets >= 1
+
+
 def test_depth_one_sees_the_emitters_only(tmp_path):
     """max_depth 1: the camera rays' hits and no bounce, so no shadow ray, and radiance
     only where a camera ray meets the light."""

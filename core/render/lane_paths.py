@@ -375,9 +375,22 @@ def _compile(smooth: bool, general: bool) -> Any:
         nee = _stack(4, 16, np.float64)
         alive = _stack(1, 16, np.bool_)[0]
         cont = _stack(1, 16, np.bool_)[0]
+        # every lane's state defined before the first packet (a lane that never gets a
+        # path, fewer paths than lanes, still runs through the lane loops: its table
+        # columns must index the tables)
         for lane in range(W):
-            path[lane] = -1
-            alive[lane] = False
+            path[lane], key[lane], depth[lane], prev_pdf[lane] = -1, 0, 0, 0.0
+            eps[lane], pos[lane] = 0.0, 0
+            alive[lane], cont[lane] = False, False
+            for c in range(6):
+                ray[c, lane] = 0.0
+            for c in range(3):
+                pt[c, lane], gn[c, lane], nrm[c, lane] = 0.0, 0.0, 0.0
+            for c in range(2):
+                ua[c, lane] = 0.0
+            for j in range(4):
+                thr[j, lane], li[j, lane], lf[j, lane], acc[j, lane] = 0.0, 0, 0.0, 0.0
+                rho[j, lane], nee[j, lane] = 0.0, 0.0
         geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn)
         mats = (refl, emit, emit_row, one_sided, tri_pmf, l_kind, l_prim, l_pos, l_dir, l_row,
                 l_scale, l_spot, l_cdf, sky_pmf, sky_row)
