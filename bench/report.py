@@ -1794,7 +1794,14 @@ def _section_recommendations(add, d) -> None:
             "hand); a packed 64-byte record per triangle for the hit's gathers (one cache "
             "line instead of seven tables): the heavy scene (200 k triangles) 0.84× its "
             "whole paths against 0.91× (by hand, 23:41), for 64 bytes more per triangle "
-            "(83 MB on the 1.3 M-triangle mesh).")
+            "(83 MB on the 1.3 M-triangle mesh); the refill of finished lanes as one loop "
+            "of selects over the lanes instead of a scalar loop over the finished ones: "
+            "1.02× (`bench.ab HEAD --scene cornell`, 6 pairs, quartiles 1.02–1.03, "
+            "2026-11-27 00:30). Fixed before it landed: a lane that never got a path "
+            "(fewer paths than lanes: the stress suite's 1-pixel render) ran the lane "
+            "loops on uninitialised stack memory and read the tables out of bounds; every "
+            "lane's state is now defined first (`tests/test_lane_paths.py`, 1, 5, 15 and "
+            "17 paths).")
     if pfc:
         ratios = ", ".join(f"{n} {r['whole_ns'] / r['wavefront_ns']:.2f}"
                            for n, r in pfc.items())
