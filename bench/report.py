@@ -1714,10 +1714,13 @@ def _section_profile_scenes(add, d) -> None:
     add("\n| | " + " | ".join(scenes) + " |\n|---|" + "---|" * len(scenes))
     add("| M paths per CPU-second | " + " | ".join(
         f"{totals[s]['paths_per_cpu_s'] / 1e6:.2f}" for s in scenes) + " |")
-    whole = {s for s in scenes if by.get((s, "whole-path kernel (with all its Embree "
-                                            "queries)"), {}).get("ns_per_path", 0.0) > 0}
+    kernels = ("whole-path kernel (with all its Embree queries)",
+               "lane-path kernel (16 paths in SIMD lanes, with its Embree packets)")
+    whole = {s for s in scenes
+             if any(by.get((s, k), {}).get("ns_per_path", 0.0) > 0 for k in kernels)}
     add("| Embree share % (nearest-hit queries; the shadow rays are traced inside the "
-        "shade kernel; –: whole paths, Embree inside their kernel, next table) | "
+        "shade kernel; –: SIMD lanes or whole paths, Embree inside their kernel, next "
+        "table) | "
         + " | ".join("–" if s in whole else f"{100 * totals[s]['embree_share']:.0f}"
                      for s in scenes) + " |")
     add("| rays per path | " + " | ".join(
