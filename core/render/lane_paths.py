@@ -51,7 +51,7 @@ from numba import njit, types
 from numba.extending import intrinsic
 from numba.np.arrayobj import make_array, populate_array
 
-from ..scene.geometry import RAY_OFFSET_POINT
+from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
 from . import whole_paths
 from .accel import MISS_DISTANCE, Accel
@@ -72,8 +72,11 @@ from .integrator import (
     RR_DEPTH,
     KernelScene,
     column,
+    face_forward,
     lerp,
+    offset_point,
     shading_normal,
+    surface_point,
     vertex_normal,
     wavefront_buffers,
 )
@@ -179,14 +182,8 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
         t = hitf[TFAR * W + lane]
         b1, b2 = hitf[HIT_U * W + lane], hitf[HIT_V * W + lane]
         dep = depth[lane]
-        px = v0[tri, 0] + b1 * e1[tri, 0] + b2 * e2[tri, 0]
-        py = v0[tri, 1] + b1 * e1[tri, 1] + b2 * e2[tri, 1]
-        pz = v0[tri, 2] + b1 * e1[tri, 2] + b2 * e2[tri, 2]
-        gx, gy, gz = ng[tri, 0], ng[tri, 1], ng[tri, 2]
-        cos_g = -(gx * dx + gy * dy + gz * dz)
-        front = cos_g > 0.0
-        sgn = np.float32(1.0) if front else np.float32(-1.0)
-        g = (gx * sgn, gy * sgn, gz * sgn)
+        p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
+        g, front, cos_g = face_forward(g, dx, dy, dz)
         gn[0, lane], gn[1, lane], gn[2, lane] = g
         # the shading normal: the interpolated vertex normal on g's side (flat: g)
         if smooth:
@@ -195,7 +192,7 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
         else:
             nrm[0, lane], nrm[1, lane], nrm[2, lane] = (np.float64(g[0]), np.float64(g[1]),
                                                         np.float64(g[2]))
-        pt[0, lane], pt[1, lane], pt[2, lane] = px, py, pz
+        pt[0, lane], pt[1, lane], pt[2, lane] = p
         m = tri_mat[tri]
         er = emit_row[m]
         lit = h and er >= 0 and (front or one_sided[m] == 0)
@@ -218,7 +215,7 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
             acc[j, lane] += e if lit or sky else 0.0
             rho[j, lane] = lerp(refl, m, li[j, lane], lf[j, lane])
         cont[lane] = h and dep + 1 < max_depth
-        eps[lane] = eps_base + RAY_OFFSET_POINT * max(abs(px), max(abs(py), abs(pz)))
+        eps[lane] = ray_offset_at(eps_base, p[0], p[1], p[2])
         ua[0, lane], ua[1, lane] = sobol2(key[lane], bounce_dim(dep, DIM_LIGHT))
         pos[lane] = 0
 
@@ -252,13 +249,10 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce,
      l_cdf) = mats[:-2]
     _, key, depth, ray, thr, li, lf, _, prev_pdf = lanes
     pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive = bounce
-    n_cdf = l_cdf.shape[0]
     lane4 = 1.0 if nlanes == 4 else 0.0
     for lane in range(eps.shape[0]):
         dep = depth[lane]
-        k = min(max(pos[lane] - 1, 0), n_cdf - 2)
-        lo = l_cdf[k]
-        p_sel = l_cdf[k + 1] - lo
+        k, p_sel, lo = lightmod.selected(l_cdf, pos[lane])
         u1 = rescale_uniform(ua[0, lane], lo, p_sel)
         lt = l_prim[k]
         px, py, pz = pt[0, lane], pt[1, lane], pt[2, lane]
@@ -283,7 +277,7 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce,
             * _INV_PI
         # the shadow ray (integrator.shadow_ray): to a finite light's target, shortened by
         # 1e-4 of its length; else along wi, 1e30 long
-        ox, oy, oz = px + gx * ep, py + gy * ep, pz + gz * ep
+        ox, oy, oz = offset_point((px, py, pz), (gx, gy, gz), ep, 1.0)
         sx, sy, sz = target[0] - ox, target[1] - oy, target[2] - oz
         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
         set_packet_ray(shadowf, shadow, lane, np.float32(ox), np.float32(oy), np.float32(oz),

@@ -179,8 +179,14 @@ def selection_pmf(power: np.ndarray, uniform_share: float = UNIFORM_SHARE) -> np
 def select(cdf, u):
     """The light k with cdf[k] <= u < cdf[k+1], its probability p_sel = cdf[k+1] - cdf[k],
     and cdf[k] (for :func:`sampling.rescale_uniform`: u reused inside the interval)."""
-    k = np.searchsorted(cdf, u, side="right") - 1
-    k = min(max(k, 0), len(cdf) - 2)
+    return selected(cdf, np.searchsorted(cdf, u, side="right"))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def selected(cdf, count):
+    """:func:`select`'s answer given count = #{k: cdf[k] <= u} (its search; the SIMD lanes
+    search with a branch-free bisection, :func:`.lane_paths.pick_lights`)."""
+    k = min(max(count - 1, 0), len(cdf) - 2)
     lo = cdf[k]
     return k, cdf[k + 1] - lo, lo
 
