@@ -76,11 +76,12 @@ def _write_image(path: Path, pixels: np.ndarray) -> str:
 
 def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     """:data:`LAMBERT_JOB` under a constant sky, with a smooth-shaded sphere, with both,
-    without its light, under an environment map, with image textures, with both, and
-    with its box moving: the SIMD lanes (``render/lane_paths.py``: :data:`LAMBERT_JOB`
-    itself and the first three) and the whole-path kernel (the others) are compiled
-    apart for each kind (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map
-    and 2 × 2 texture are written into ``folder``."""
+    without its light, under an environment map, with both and an image texture (the
+    default fly-by's kind), with that under the map instead, and with its box moving:
+    the SIMD lanes (``render/lane_paths.py``: :data:`LAMBERT_JOB` itself, the first three
+    and the textured one) and the whole-path kernel (the others) are compiled apart for
+    each kind (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map and 2 × 2
+    texture are written into ``folder``."""
     sky = _write_image(folder / "sky.exr", np.full((4, 8, 3), 0.5))
     checker = _write_image(folder / "checker.exr", np.indices((2, 2, 3)).sum(axis=0) % 2)
     under_sky = {**LAMBERT_JOB, "scene": {"background": [0.1, 0.1, 0.1]}}
@@ -90,7 +91,7 @@ def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     dark = copy.deepcopy(LAMBERT_JOB)  # no light: the lanes have nothing to sample
     dark["objects"] = dark["objects"][:1]
     env = {**LAMBERT_JOB, "scene": {"environment": {"file": sky}}}
-    tex = copy.deepcopy(LAMBERT_JOB)
+    tex = copy.deepcopy({**smooth, "scene": under_sky["scene"]})
     tex["materials"][0]["base_color_texture"] = checker
     moving = copy.deepcopy(LAMBERT_JOB)
     moving["objects"][0]["velocity"] = [0.0, 0.0, 0.5]

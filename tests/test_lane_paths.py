@@ -1,6 +1,7 @@
 """core/render/lane_paths.py: sixteen Lambert paths at a time in SIMD lanes, for static
-scenes without a map or textures (flat or smooth-shaded; lit by emissive triangles,
-point, spot and sun lights and a constant sky).
+scenes without a map (flat or smooth-shaded, with or without image textures: base colour,
+roughness, normal and emission; lit by emissive triangles, point, spot and sun lights and
+a constant sky).
 
 Its estimator is whole_paths.py's (and the wavefront integrator's), with the same random
 numbers, so the three must give the same radiance path by path (to float32 rounding: a
@@ -68,9 +69,22 @@ def _everything(data):
         change(data)
 
 
-def lane_scene(scene: str, spectral: str, beta: float, **render) -> dict:
+def _smooth_textured(data, folder):
+    """The textures (base colour, roughness, normal map, emission) and a smooth-shaded
+    ball whose normal map bends its interpolated normals, under a sky."""
+    _vertex_normals(data)
+    _sky(data)
+    _textures(data, folder)
+    ball = next(o for o in data["objects"] if o["name"] == "ball")
+    ball["material"] = "red"
+
+
+def lane_scene(scene: str, spectral: str, beta: float, folder=None, **render) -> dict:
     data = cornell(spectral=spectral, spp=8, **render)
     data["motion"]["beta"] = [0.0, beta, 0.0]
+    if scene in ("textures", "smooth_textured"):
+        (_textures if scene == "textures" else _smooth_textured)(data, folder)
+        return data
     {"cornell": lambda _: None, "glowing_blocks": _glowing_blocks,
      "two_sided_light": _two_sided_light, "vertex_normals": _vertex_normals, "sky": _sky,
      "sky_transparent": _sky_on_a_transparent_film, "delta_lights": _delta_lights,
@@ -87,23 +101,29 @@ def lane_scene(scene: str, spectral: str, beta: float, **render) -> dict:
     ("two_sided_light", "cie1931", 0.0, {}), ("vertex_normals", "cie1931", 0.0, {}),
     ("sky", "cie1931", 0.3, {}), ("sky_transparent", "cie1931", 0.0, {}),
     ("delta_lights", "cie1931", 0.0, {}), ("delta_lights", "rgb", 0.0, {}),
-    ("everything", "cie1931", 0.5, {}), ("everything", "rgb", 0.0, {"max_depth": 3})])
+    ("everything", "cie1931", 0.5, {}), ("everything", "rgb", 0.0, {"max_depth": 3}),
+    ("textures", "cie1931", 0.0, {}), ("textures", "cie1931", 0.6, {}),
+    ("textures", "rgb", 0.0, {}), ("textures", "cie1931", 0.0, {"max_depth": 2}),
+    ("smooth_textured", "cie1931", 0.3, {})])
 def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
         tmp_path, scene, spectral, beta, render):
-    fr, ev = renderer(lane_scene(scene, spectral, beta, **render), tmp_path)
+    fr, ev = renderer(lane_scene(scene, spectral, beta, tmp_path, **render), tmp_path)
     assert fr.whole_paths and fr.lane_paths
+    assert lane_paths.kind(fr.kernel)[2] == ("textur" in scene)
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth = fr.settings.max_depth
     seen = not fr.settings.transparent
     n = len(keys)
+    # the ray cones' start (textures' level of detail): a spread per path
+    spread = np.random.default_rng(3).uniform(1e-3, 2e-2, n).astype(np.float32)
     L1, t1 = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32)
     rays1 = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu, nlanes, depth,
-                                  L1, t1, sky_seen=seen)
+                                  L1, t1, sky_seen=seen, spread=spread)
     L2, t2 = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
-    rays2 = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
-                                      np.zeros(n, np.float32), nlanes, depth, seen, L2, t2)
+    rays2 = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu, spread,
+                                      nlanes, depth, seen, L2, t2)
     L3, t3, _, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
-                         nlanes, sky_seen=seen)
+                         nlanes, sky_seen=seen, spread=spread)
     assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
     if nlanes == 3:
         assert np.all(L1[:, 3] == 0.0)
@@ -188,7 +208,7 @@ def _no_light(data):
     data["objects"] = [o for o in data["objects"] if o["name"] != "ceiling_light"]
 
 
-@pytest.mark.parametrize("change", [_textures, _no_light, "environment", "moving"])
+@pytest.mark.parametrize("change", [_no_light, "environment", "moving"])
 def test_scenes_that_need_more_take_scalar_whole_paths(tmp_path, change):
     if change == "environment":
         data = environment_scene(tmp_path)
@@ -196,7 +216,7 @@ def test_scenes_that_need_more_take_scalar_whole_paths(tmp_path, change):
         data = scene_data(tmp_path, "cornell+moving_blocks", "cie1931", 0.0)
     else:
         data = cornell()
-        change(*((data, tmp_path) if change is _textures else (data,)))
+        change(data)
     fr, _ = renderer(data, tmp_path)
     assert fr.whole_paths and not fr.lane_paths
     assert not lane_paths.applies(fr.kernel, fr.prep.tracer, False)
@@ -208,8 +228,11 @@ def test_denoising_features_leave_the_lanes(tmp_path):
     assert not lane_paths.applies(fr.kernel, fr.prep.tracer, True)
 
 
-def test_the_renderer_takes_the_lanes_and_its_image_is_that_of_whole_paths(tmp_path):
-    fr, ev = renderer(cornell(spp=8), tmp_path)
+@pytest.mark.parametrize("scene", ["cornell", "textures"])
+def test_the_renderer_takes_the_lanes_and_its_image_is_that_of_whole_paths(tmp_path, scene):
+    # (with textures: the renderer gives the lanes its camera rays' spread, as to whole
+    # paths, so the levels of detail agree)
+    fr, ev = renderer(lane_scene(scene, "cie1931", 0.0, tmp_path), tmp_path)
     assert fr.whole_paths and fr.lane_paths
     img = fr.render(ev, 1)[0].resolve(fr.to_rgb)
     fr.lane_paths = False

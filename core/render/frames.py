@@ -417,7 +417,8 @@ class FrameRenderer:
             L, t_hit, seg = lane_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
                                              o_local, d_lab, lamu, nlanes,
                                              sky_seen=not s.transparent,
-                                             buffers=keep.setdefault("whole", {}))
+                                             buffers=keep.setdefault("whole", {}),
+                                             spread=spread)
         elif self.whole_paths:
             L, t_hit, seg = whole_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
                                               o_local, d_lab, lamu, nlanes,

@@ -93,6 +93,20 @@ from .sampling import (
     sobol2,
     to_world,
 )
+from .textures import (
+    BASE,
+    EMISSION,
+    NORMAL,
+    ROUGHNESS,
+    base_texel,
+    bounce_spread,
+    hit_lod,
+    normal_texel,
+    scalar_texel,
+    slot_texel,
+    texel_reflectance,
+    triangle_uv,
+)
 
 _INV_PI = 1.0 / math.pi
 _INVALID = np.uint32(0xFFFFFFFF)
@@ -111,7 +125,7 @@ def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     texture, and with a light to sample (emissive triangles, point, spot or sun lights,
     the constant sky)."""
     return (isinstance(accel, Accel) and whole_paths.applies(sc, accel, features)
-            and not sc.env_on and not sc.tex.enabled and len(sc.l_kind) > 0)
+            and not sc.env_on and len(sc.l_kind) > 0)
 
 
 _LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
@@ -221,6 +235,80 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
 
 
 @njit(**_LANES)
+def texture_lanes(geo, tex, mats, nlanes, hit, hitf, lanes, bounce, cones,
+                  scratch):  # pragma: no cover - compiled
+    """The image textures of the packet's hits, lane by lane (:mod:`.whole_paths`' block,
+    :func:`.integrator.shade`'s for Lambert materials), after :func:`shade_hits`: at the
+    ray cone's width W + β t the hit's level of detail (:func:`.textures.hit_lod`); the
+    base colour's texel spectrum for ρ(λ) (:func:`.textures.texel_reflectance` at the
+    lane's wavelengths), a normal map's normal for n, an emission texel (MIS weight 1)
+    into ``acc``, the roughness for the cone; then the cone goes on from the hit
+    (width W + β t, spread :func:`.textures.bounce_spread`). The lookups are scalar calls
+    (a loop of its own, so :func:`shade_hits` stays vector code); the sixteen lanes'
+    independent lookups overlap their cache misses. ``cones``: (width, spread) rows and
+    the lanes' table coordinates (W, 4); ``scratch``: one lane's base colour, ρ, and its
+    throughput, columns, emission and table coordinates for
+    :func:`.whole_paths.texture_emission`."""
+    v0, e1, e2, ng, area, tri_mat, vn, has_vn = geo
+    (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
+     t_mat_flag, t_nscale, t_estr, _, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65, t_rgb, _,
+     _, _) = tex
+    mat_alpha, emit, one_sided = mats
+    path, _, _, ray, thr, li, lf, acc, _ = lanes
+    _, gn, nrm, _, rho, _, _, _, _, _ = bounce
+    cone, lamw = cones
+    alb, rho1, thr1, li1, lf1, em, lam1 = scratch
+    for lane in range(W):
+        if path[lane] < 0 or hit[GEOM * W + lane] == _INVALID:
+            continue
+        tri = np.int64(hit[PRIM * W + lane])
+        b1, b2 = hitf[HIT_U * W + lane], hitf[HIT_V * W + lane]
+        dx, dy, dz = ray[3, lane], ray[4, lane], ray[5, lane]
+        g = (gn[0, lane], gn[1, lane], gn[2, lane])
+        _, front, cos_g = face_forward((ng[tri, 0], ng[tri, 1], ng[tri, 2]), np.float64(dx),
+                                       np.float64(dy), np.float64(dz))
+        m = tri_mat[tri]
+        a = np.float64(mat_alpha[m])
+        cone_w = cone[0, lane] + cone[1, lane] * hitf[TFAR * W + lane]
+        if t_mat_flag[m] != 0:
+            uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
+            lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
+            if t_mat_tex[m, BASE] >= 0:
+                base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                           t_mat_lod, m, uv[0], uv[1], lod, alb)
+                texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamw, lane, t_uvir[m, 0],
+                                  t_uvir[m, 1], nlanes, rho1)
+                for j in range(nlanes):
+                    rho[j, lane] = rho1[j]
+            if t_mat_tex[m, ROUGHNESS] >= 0:
+                r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
+                                  t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0], uv[1],
+                                  lod)
+                a = max(r_ * r_, 1e-4)
+            if t_mat_tex[m, NORMAL] >= 0:
+                n0 = (ng[tri, 0], ng[tri, 1], ng[tri, 2])
+                if has_vn:
+                    n0 = vertex_normal(vn, tri, b1, b2)
+                nrm[0, lane], nrm[1, lane], nrm[2, lane] = shading_normal(
+                    normal_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                                 t_mat_lod, m, uv[0], uv[1], lod, t_nscale[m], n0, e1, e2, tri,
+                                 duv1, duv2), g, dx, dy, dz)
+            if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
+                for j in range(4):
+                    thr1[j], li1[j], lf1[j] = thr[j, lane], li[j, lane], lf[j, lane]
+                    em[0, j], lam1[0, j] = 0.0, lamw[lane, j]
+                whole_paths.texture_emission(
+                    em, 0, thr1, li1, lf1, lam1, nlanes, t_rgb, t_estr[m], emit, t_d65,
+                    t_cscale, t_cdata, slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                                  t_mat_factor, t_mat_lod, m,
+                                                  np.int64(EMISSION), uv[0], uv[1], lod))
+                for j in range(4):
+                    acc[j, lane] += em[0, j]
+        cone[0, lane] = cone_w
+        cone[1, lane] = bounce_spread(cone[1, lane], a, False)
+
+
+@njit(**_LANES)
 def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
     """Each lane's light by the CDF: ``pos`` = #{k: cdf[k] ≤ u} (u = ``ua[0]``), a binary
     search of the same length in every lane (``lights.select``'s searchsorted)."""
@@ -322,22 +410,24 @@ def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
             acc[j, lane] += nee[j, lane] if seen else 0.0
 
 
-def _compile(smooth: bool, general: bool) -> Any:
+def _compile(smooth: bool, general: bool, textured: bool) -> Any:
     """The lane kernel for one kind of scene (:func:`kernel`): ``smooth`` vertex normals,
     ``general`` lights other than emissive triangles (point, spot, sun, the constant
-    sky). Both are constants of the compiled code: LLVM drops the branches they close,
-    so the Cornell box's lanes carry no normal interpolation and no light kinds it does
-    not have (numba's on-disk cache keys each variant by its closure's values)."""
+    sky), ``textured`` image textures (:func:`texture_lanes`). The three are constants of
+    the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
+    carry no normal interpolation, no light kinds it does not have and no texture lookups
+    (numba's on-disk cache keys each variant by its closure's values)."""
 
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
-    def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, refl, emit, emit_row,
-                   one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot, l_cdf, tri_pmf,
-                   sky_pmf, sky_row, eps_base, keys, o, d, lamu, nlanes, max_depth, sky_seen, L,
-                   first_t, log):  # pragma: no cover - compiled
+    def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
+                   emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
+                   l_cdf, tri_pmf, sky_pmf, sky_row, eps_base, tex, keys, o, d, lamu, spread,
+                   nlanes, max_depth, sky_seen, L, first_t, log):  # pragma: no cover - compiled
         """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
         the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
-        coordinates), the outputs and the packet log (:data:`NO_LOG`: none kept). Returns
-        (nearest-hit rays, shadow rays, packets)."""
+        coordinates, the camera rays' spread angles: read with textures only), the outputs
+        and the packet log (:data:`NO_LOG`: none kept). Returns (nearest-hit rays, shadow
+        rays, packets)."""
         n_paths = keys.shape[0]
         top = emit.shape[1] - 1
         # the packets and the lanes' arrays live on the stack (sizes for W = 16: literals)
@@ -369,6 +459,14 @@ def _compile(smooth: bool, general: bool) -> Any:
         nee = _stack(4, 16, np.float64)
         alive = _stack(1, 16, np.bool_)[0]
         cont = _stack(1, 16, np.bool_)[0]
+        # with textures: the ray cones (width, spread), the lanes' table coordinates, one
+        # lane's values for the texture calls (texture_lanes)
+        cone = _stack(2, 16, np.float64)
+        lamw = _stack(16, 4, np.float32)
+        scratch = (_stack(1, 3, np.float64)[0], _stack(1, 4, np.float64)[0],
+                   _stack(1, 4, np.float64)[0], _stack(1, 4, np.int64)[0],
+                   _stack(1, 4, np.float64)[0], _stack(1, 4, np.float32),
+                   _stack(1, 4, np.float32))
         # every lane's state defined before the first packet (a lane that never gets a
         # path, fewer paths than lanes, still runs through the lane loops: its table
         # columns must index the tables)
@@ -381,10 +479,10 @@ def _compile(smooth: bool, general: bool) -> Any:
             for c in range(3):
                 pt[c, lane], gn[c, lane], nrm[c, lane] = 0.0, 0.0, 0.0
             for c in range(2):
-                ua[c, lane] = 0.0
+                ua[c, lane], cone[c, lane] = 0.0, 0.0
             for j in range(4):
                 thr[j, lane], li[j, lane], lf[j, lane], acc[j, lane] = 0.0, 0, 0.0, 0.0
-                rho[j, lane], nee[j, lane] = 0.0, 0.0
+                rho[j, lane], nee[j, lane], lamw[lane, j] = 0.0, 0.0, 0.0
         geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn)
         mats = (refl, emit, emit_row, one_sided, tri_pmf, l_kind, l_prim, l_pos, l_dir, l_row,
                 l_scale, l_spot, l_cdf, sky_pmf, sky_row)
@@ -414,6 +512,10 @@ def _compile(smooth: bool, general: bool) -> Any:
                         thr[j, lane] = 1.0
                         acc[j, lane] = 0.0
                     prev_pdf[lane] = 0.0
+                    if textured:
+                        cone[0, lane], cone[1, lane] = 0.0, np.float64(spread[i])
+                        for j in range(4):
+                            lamw[lane, j] = lamu[i, j]
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
                     busy += 1
@@ -428,6 +530,9 @@ def _compile(smooth: bool, general: bool) -> Any:
             intersect16(handle, valid, hit)
             shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce,
                        smooth, general)
+            if textured:
+                texture_lanes(geo, tex, (mat_alpha, emit, one_sided), nlanes, hit, hitf, lanes,
+                              bounce, (cone, lamw), scratch)
             pick_lights(l_cdf, ua, pos)
             sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general)
             for lane in range(W):
@@ -458,23 +563,24 @@ def _compile(smooth: bool, general: bool) -> Any:
     return lane_paths
 
 
-def kind(sc: KernelScene) -> tuple[bool, bool]:
+def kind(sc: KernelScene) -> tuple[bool, bool, bool]:
     """The scene's kind of lane kernel (:func:`_compile`): (vertex normals, lights other
-    than emissive triangles or a constant sky)."""
+    than emissive triangles or a constant sky, image textures)."""
     return (bool(sc.has_vn), bool(np.any(np.asarray(sc.l_kind) != lightmod.TRIANGLE))
-            or int(sc.sky_row) >= 0)
+            or int(sc.sky_row) >= 0, bool(sc.tex.enabled))
 
 
-#: the compiled variants, by (smooth, general) (:func:`kernel`)
-_KERNELS: dict[tuple[bool, bool], Any] = {}
+#: the compiled variants, by (smooth, general, textured) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def kernel(smooth: bool, general: bool) -> Any:
-    """The lane kernel for scenes with or without vertex normals and with or without
-    lights other than emissive triangles (:func:`_compile`); made once per kind, also
-    when several render threads ask for it at once."""
-    key = (bool(smooth), bool(general))
+def kernel(smooth: bool, general: bool, textured: bool = False) -> Any:
+    """The lane kernel for scenes with or without vertex normals, with or without
+    lights other than emissive triangles, with or without image textures
+    (:func:`_compile`); made once per kind, also when several render threads ask for it
+    at once."""
+    key = (bool(smooth), bool(general), bool(textured))
     with _KERNELS_LOCK:
         if key not in _KERNELS:
             _KERNELS[key] = _compile(*key)
@@ -498,36 +604,39 @@ def packet_log(n_paths: int, max_depth: int) -> tuple:
 
 def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
                d: np.ndarray, lamu: np.ndarray, nlanes: int, max_depth: int, L: np.ndarray,
-               first_t: np.ndarray, sky_seen: bool = True,
-               log: tuple | None = None) -> tuple[int, int, int]:
+               first_t: np.ndarray, sky_seen: bool = True, log: tuple | None = None,
+               spread: np.ndarray | float = 0.0) -> tuple[int, int, int]:
     """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
     ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
     its end through the scene ``sc`` (where :func:`applies`), sixteen at a time: its lab
     radiance per lane into ``L[i]`` (float32 (N, 4); lanes ≥ nlanes 0) and the camera
     ray's hit distance into ``first_t[i]`` (1e30: none). ``log`` (benchmarks,
-    :func:`packet_log`): every packet's rays. Returns (nearest-hit rays, shadow rays,
-    packets)."""
+    :func:`packet_log`): every packet's rays. With textures, ``spread`` ((N,) or one for
+    all) is the camera rays' lab spread angle, the start of their ray cones
+    (:func:`.textures.lab_spread`). Returns (nearest-hit rays, shadow rays, packets)."""
     run = kernel(*kind(sc))
     return run(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
-               sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
-               sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
-               sc.sky_pmf, sc.sky_row, float(sc.eps), keys, o, d, lamu, nlanes, max_depth,
-               sky_seen, L, first_t, NO_LOG if log is None else log)
+               sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind,
+               sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
+               sc.tri_pmf, sc.sky_pmf, sc.sky_row, float(sc.eps), sc.tex, keys, o, d, lamu,
+               whole_paths.cone_spread(sc, spread, len(keys)), nlanes, max_depth, sky_seen, L,
+               first_t, NO_LOG if log is None else log)
 
 
 def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
-          sky_seen: bool = True,
-          buffers: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          sky_seen: bool = True, buffers: dict | None = None,
+          spread: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`.whole_paths.trace` for a scene where :func:`applies`: (L (N, 4) lab
     radiance, the camera rays' hit distances (1e30: none), the moving segments they hit
     (all -1: the scene is static)), the arrays kept in ``buffers`` until its next use
     (:func:`.integrator.wavefront_buffers`). ``o_local``/``d`` float32 (N, 3) camera rays
     in accelerator coordinates, ``lamu`` the lanes' table coordinates (N, 4); ``sky_seen``
-    False hides the sky from the camera rays (a transparent film)."""
+    False hides the sky from the camera rays (a transparent film); ``spread`` the camera
+    rays' lab spread angles ((N,) or one for all; textures' level of detail)."""
     b = wavefront_buffers(len(keys), buffers, whole_paths.BUFFERS)
     b["seg"][:] = -1
     lane_trace(sc, accel, keys, np.ascontiguousarray(o_local, np.float32),
                np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-               nlanes, max_depth, b["L"], b["first_t"], sky_seen)
+               nlanes, max_depth, b["L"], b["first_t"], sky_seen, spread=spread)
     return b["L"], b["first_t"], b["seg"]

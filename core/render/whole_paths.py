@@ -684,12 +684,19 @@ def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.
     time of the camera rays' origin event (moving bodies); ``spread``: the camera rays'
     lab spread angles ((N,) or one for all), the ray cones' start for the textures' level
     of detail."""
-    n = len(keys)
-    b = wavefront_buffers(n, buffers, BUFFERS)
+    b = wavefront_buffers(len(keys), buffers, BUFFERS)
     b["seg"][:] = -1
-    spread = (np.ascontiguousarray(np.broadcast_to(np.asarray(spread, np.float32), (n,)))
-              if sc.tex.enabled else _NO_SPREAD)
     lambert_paths(sc, accel, keys, np.ascontiguousarray(o_local, np.float32),
                   np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-                  spread, nlanes, max_depth, sky_seen, b["L"], b["first_t"], b["seg"], t0)
+                  cone_spread(sc, spread, len(keys)), nlanes, max_depth, sky_seen, b["L"],
+                  b["first_t"], b["seg"], t0)
     return b["L"], b["first_t"], b["seg"]
+
+
+def cone_spread(sc: KernelScene, spread: np.ndarray | float, n: int) -> np.ndarray:
+    """The kernels' ``spread`` of ``n`` camera rays: their lab spread angles ((N,) or one
+    for all) as a float32 (N,) array when the scene has textures (the ray cones' start),
+    else a placeholder the kernels never read."""
+    if not sc.tex.enabled:
+        return _NO_SPREAD
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(spread, np.float32), (n,)))
