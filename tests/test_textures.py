@@ -147,6 +147,34 @@ def test_mip_level_selection_and_blend(tmp_path):
     np.testing.assert_allclose(look(t, 0.25, 0.25, 2.0)[:3], c2, rtol=1e-5)
 
 
+def test_texel_reflectance_is_the_tables_blend_of_sigmoids_bit_for_bit():
+    """texel_reflectance's four lanes at once (one vector loop of 32 sigmoids) give, lane
+    by lane, rgb_table.cell_reflectance at the lane's wavelength exactly: colours,
+    greys, black, white, wavelengths inside and outside the sigmoid band; the material's
+    reflectance_uv/_ir below/above the band; the rgb mode's channels."""
+    from relray.core.physics import rgb_table
+
+    scale, data = tx.coefficient_table()
+    rng = np.random.default_rng(7)
+    rgb = rng.random((400, 3))
+    rgb[:40] = rgb[:40, :1]  # greys
+    rgb[40], rgb[41] = 0.0, 1.0
+    lamu = (rng.random((400, 4)) * 120.0 - 10.0).astype(np.float32)  # columns, some beyond
+    rho = np.zeros(4)
+    for i in range(len(rgb)):
+        cell = rgb_table.table_cell(scale, data, *rgb[i])
+        lam = [rgb_table.lambda_of_column(float(u)) for u in lamu[i]]
+        want = [rgb_table.cell_reflectance(data, cell, x) for x in lam]
+        tx.texel_reflectance(rgb[i], False, scale, data, lamu, i, math.nan, math.nan, 4, rho)
+        assert list(rho) == want, i
+        tx.texel_reflectance(rgb[i], False, scale, data, lamu, i, 0.25, 0.75, 4, rho)
+        lo, hi = rgb_table.SIGMOID_BAND_NM
+        assert list(rho) == [0.25 if x < lo else 0.75 if x > hi else w
+                             for x, w in zip(lam, want)], i
+    tx.texel_reflectance(rgb[0], True, scale, data, lamu, 0, math.nan, math.nan, 3, rho)
+    assert list(rho[:3]) == list(rgb[0])
+
+
 def test_pixel_spread_and_lab_spread():
     assert tx.pixel_spread(math.tan(math.radians(30)), 100) == pytest.approx(
         math.atan(2 * math.tan(math.radians(30)) / 100))

@@ -283,9 +283,16 @@ def table_reflectance(scale, data, r, g, b, lam_nm):
 def sigmoid_reflectance(c0, c1, c2, lam_nm):
     """s(λ) = ½ + ½ x/√(1+x²), x = (c0 t + c1) t + c2, t = (clip(λ, 380, 720) - 380)/340
     (rest frame of the surface; module docstring)."""
-    t = (min(max(lam_nm, _BAND_LO), _BAND_HI) - _BAND_LO) * _INV_BAND
+    t = band_coordinate(lam_nm)
     x = (c0 * t + c1) * t + c2
     return 0.5 + 0.5 * x / math.sqrt(1.0 + x * x)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy", fastmath=False)
+def band_coordinate(lam_nm):
+    """t = (clip(λ, 380, 720) - 380)/340: where the wavelength λ (nm) falls in the
+    sigmoid's band (:func:`sigmoid_reflectance`)."""
+    return (min(max(lam_nm, _BAND_LO), _BAND_HI) - _BAND_LO) * _INV_BAND
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")

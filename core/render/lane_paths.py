@@ -12,17 +12,20 @@ selects and masks), their shadow rays one
 queue before the next packet. This is what Mitsuba 3's LLVM variant does with its
 JIT-compiled kernels, written out by hand for the scenes where it pays
 (:func:`applies`): static, Lambert, flat or smooth-shaded, lit by emissive triangles,
-point, spot and sun lights or a constant sky, without image textures or an environment
-map (their lookups are libm and table searches that stay scalar: an environment-lit
-scene traced in lanes cost 1.00× its whole paths, so it keeps them).
+point, spot and sun lights or a constant sky, with or without image textures, without an
+environment map (its lookups are libm calls and table searches that stay scalar: an
+environment-lit scene traced in lanes cost 1.00× its whole paths, so it keeps them).
+Image textures (base colour, roughness, normal, emission) are a lane loop of their own
+(:func:`texture_lanes`: scalar calls per lane, whose cache misses overlap), so the
+other loops stay vector code.
 
 What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
-(:func:`_stack`, no owner and no reference counting), so LLVM knows that nothing the
-loops write aliases the scene's tables they read (with heap arrays it found "unsafe
-dependent memory operations" and vectorised nothing); each loop is a function inlined
-into the kernel (:data:`_LANES`), with fewer than 30 arguments (Python 3.11 passes more
-as ``*args``, which numba cannot inline); its code is one straight run of selects
-(:func:`.sampling.sincos_2pi`'s quadrant, :func:`.lights.sample_triangle`).
+(:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
+nothing the loops write aliases the scene's tables they read (with heap arrays it found
+"unsafe dependent memory operations" and vectorised nothing); each loop is a function
+inlined into the kernel (:data:`_LANES`), with fewer than 30 arguments (Python 3.11
+passes more as ``*args``, which numba cannot inline); its code is one straight run of
+selects (:func:`.sampling.sincos_2pi`'s quadrant, :func:`.lights.sample_triangle`).
 
 The estimator is :func:`.whole_paths.lambert_paths`', sample for sample (the same random
 numbers, light selection, offsets and table lookups; that module's docstring): at a hit
@@ -46,10 +49,7 @@ import threading
 from typing import Any
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.extending import intrinsic
-from numba.np.arrayobj import make_array, populate_array
+from numba import njit
 
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
@@ -93,6 +93,7 @@ from .sampling import (
     sobol2,
     to_world,
 )
+from .stack import stack_array
 from .textures import (
     BASE,
     EMISSION,
@@ -121,46 +122,18 @@ assert W == 16 and PACKET_WORDS * W == 384
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     """Whether :func:`lane_paths` can trace the scene ``sc``: one where
     :func:`.whole_paths.applies` (Lambert, no alpha mask, no area-light quad, no
-    denoising features) whose BVH is static, with no environment map and no image
-    texture, and with a light to sample (emissive triangles, point, spot or sun lights,
-    the constant sky)."""
+    denoising features) whose BVH is static, with no environment map (image textures
+    may be there), and with a light to sample (emissive triangles, point, spot or sun
+    lights, the constant sky)."""
     return (isinstance(accel, Accel) and whole_paths.applies(sc, accel, features)
             and not sc.env_on and len(sc.l_kind) > 0)
 
 
 _LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
 """The lane loops' compile options: inlined into :func:`lane_paths`, where the lanes'
-arrays are its own stack memory (:func:`_stack`), so LLVM knows that nothing the
-loops read from the scene's arrays is written by them and vectorises each loop over
+arrays are its own stack memory (:func:`.stack.stack_array`), so LLVM knows that nothing
+the loops read from the scene's arrays is written by them and vectorises each loop over
 the lanes."""
-
-
-@intrinsic(prefer_literal=True)
-def _stack(typingctx, rows, cols, dtype):  # pragma: no cover - compiled
-    """A C-contiguous (rows, cols) array of ``dtype`` (rows and cols literals) in fresh
-    stack memory of the calling function, aligned to 64 bytes and uninitialised; it has
-    no owner to count references to."""
-    if not (isinstance(rows, types.IntegerLiteral) and isinstance(cols, types.IntegerLiteral)):
-        return None
-    shape = (rows.literal_value, cols.literal_value)
-    elem = dtype.instance_type if isinstance(dtype, types.NumberClass) else dtype.dtype
-    aryty = types.Array(elem, 2, "C")
-
-    def codegen(context, builder, signature, args):
-        lty = context.get_data_type(elem)
-        with builder.goto_entry_block():
-            slot = builder.alloca(ir.ArrayType(lty, shape[0] * shape[1]))
-            slot.align = 64
-        ary = make_array(aryty)(context, builder)
-        size = context.get_abi_sizeof(lty)
-        intp = context.get_value_type(types.intp)
-        populate_array(ary, data=builder.bitcast(slot, lty.as_pointer()),
-                       shape=[intp(n) for n in shape],
-                       strides=[intp(shape[1] * size), intp(size)], itemsize=intp(size),
-                       meminfo=None)
-        return ary._getvalue()
-
-    return aryty(rows, cols, dtype), codegen
 
 
 @njit(**_LANES)
@@ -431,42 +404,42 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
         n_paths = keys.shape[0]
         top = emit.shape[1] - 1
         # the packets and the lanes' arrays live on the stack (sizes for W = 16: literals)
-        hit = _stack(1, 384, np.uint32)[0]
+        hit = stack_array(1, 384, np.uint32)[0]
         hitf = hit.view(np.float32)
-        shadow = _stack(1, 384, np.uint32)[0]
+        shadow = stack_array(1, 384, np.uint32)[0]
         shadowf = shadow.view(np.float32)
-        valid = _stack(1, 16, np.int32)[0]
-        svalid = _stack(1, 16, np.int32)[0]
+        valid = stack_array(1, 16, np.int32)[0]
+        svalid = stack_array(1, 16, np.int32)[0]
         # a lane's path: its index (-1: none), key, bounce, ray, throughput and lanes' table
         # columns, its radiance so far, the pdf of the ray's direction
-        path = _stack(1, 16, np.int64)[0]
-        key = _stack(1, 16, np.uint64)[0]
-        depth = _stack(1, 16, np.int64)[0]
-        ray = _stack(6, 16, np.float32)
-        thr = _stack(4, 16, np.float64)
-        li = _stack(4, 16, np.int64)
-        lf = _stack(4, 16, np.float64)
-        acc = _stack(4, 16, np.float32)
-        prev_pdf = _stack(1, 16, np.float64)[0]
+        path = stack_array(1, 16, np.int64)[0]
+        key = stack_array(1, 16, np.uint64)[0]
+        depth = stack_array(1, 16, np.int64)[0]
+        ray = stack_array(6, 16, np.float32)
+        thr = stack_array(4, 16, np.float64)
+        li = stack_array(4, 16, np.int64)
+        lf = stack_array(4, 16, np.float64)
+        acc = stack_array(4, 16, np.float32)
+        prev_pdf = stack_array(1, 16, np.float64)[0]
         # one bounce's values, between the lane loops
-        pt = _stack(3, 16, np.float32)
-        gn = _stack(3, 16, np.float32)
-        nrm = _stack(3, 16, np.float64)
-        eps = _stack(1, 16, np.float64)[0]
-        rho = _stack(4, 16, np.float64)
-        ua = _stack(2, 16, np.float64)
-        pos = _stack(1, 16, np.int64)[0]
-        nee = _stack(4, 16, np.float64)
-        alive = _stack(1, 16, np.bool_)[0]
-        cont = _stack(1, 16, np.bool_)[0]
+        pt = stack_array(3, 16, np.float32)
+        gn = stack_array(3, 16, np.float32)
+        nrm = stack_array(3, 16, np.float64)
+        eps = stack_array(1, 16, np.float64)[0]
+        rho = stack_array(4, 16, np.float64)
+        ua = stack_array(2, 16, np.float64)
+        pos = stack_array(1, 16, np.int64)[0]
+        nee = stack_array(4, 16, np.float64)
+        alive = stack_array(1, 16, np.bool_)[0]
+        cont = stack_array(1, 16, np.bool_)[0]
         # with textures: the ray cones (width, spread), the lanes' table coordinates, one
         # lane's values for the texture calls (texture_lanes)
-        cone = _stack(2, 16, np.float64)
-        lamw = _stack(16, 4, np.float32)
-        scratch = (_stack(1, 3, np.float64)[0], _stack(1, 4, np.float64)[0],
-                   _stack(1, 4, np.float64)[0], _stack(1, 4, np.int64)[0],
-                   _stack(1, 4, np.float64)[0], _stack(1, 4, np.float32),
-                   _stack(1, 4, np.float32))
+        cone = stack_array(2, 16, np.float64)
+        lamw = stack_array(16, 4, np.float32)
+        scratch = (stack_array(1, 3, np.float64)[0], stack_array(1, 4, np.float64)[0],
+                   stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.int64)[0],
+                   stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.float32),
+                   stack_array(1, 4, np.float32))
         # every lane's state defined before the first packet (a lane that never gets a
         # path, fewer paths than lanes, still runs through the lane loops: its table
         # columns must index the tables)
