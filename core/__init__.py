@@ -19,14 +19,17 @@ Packages follow the data flow, and each imports only those before it (the layeri
 
 The core runs its own worker threads (one per core), so BLAS thread pools would only
 oversubscribe the machine: unless the environment says otherwise, BLAS and OpenMP are
-pinned to one thread here, before numpy is first imported.
+pinned to one thread here, before numpy is first imported. No kernel calls BLAS either,
+so numba's probe for it, which imports scipy.linalg, is answered "none" (:class:`_NoBlasProbe`).
 """
 
 import atexit
 import hashlib
+import importlib.abc
 import logging
 import os
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -95,10 +98,40 @@ def cache_fallback(path: str, what: str) -> str:
     return tmp
 
 
+class _NoBlasProbe(importlib.abc.MetaPathFinder):
+    """Answers numba's probe for BLAS with "none", without importing scipy.linalg.
+
+    numba loads its NumPy support at the first compile or cache load, and on the way
+    (``numba.np.arraymath._check_blas``) imports ``scipy.linalg.cython_blas`` to learn
+    whether ``np.dot`` and the like may call BLAS: 0.13 s of the first image's second
+    (issue 12), for no use, since no relray kernel calls BLAS (the probe's answer only
+    picks np.convolve's inner product in compiled code). This finder refuses ``scipy``
+    (or ``scipy.linalg``) to that one caller, once; any other import, and numba's own
+    later ``ensure_blas`` when a kernel does call BLAS, goes through as usual. Where
+    scipy.linalg is already loaded, the probe finds it and nothing changes."""
+
+    def find_spec(self, name, path=None, target=None):  # noqa: ARG002 - finder protocol
+        if name not in ("scipy", "scipy.linalg"):
+            return None
+        frame = sys._getframe(1)
+        while frame is not None:
+            code = frame.f_code
+            if code.co_name == "_check_blas" and code.co_filename.endswith(
+                    os.path.join("numba", "np", "arraymath.py")):
+                if self in sys.meta_path:
+                    sys.meta_path.remove(self)
+                raise ImportError("relray: numba's BLAS probe answered 'none' (no kernel "
+                                  "calls BLAS)")
+            frame = frame.f_back
+        return None
+
+
 def _use_kernel_cache() -> None:
     import numba
 
     numba.config.CACHE_DIR = cache_fallback(kernel_cache_dir(), "kernels are compiled")
+    if "numba.np.arraymath" not in sys.modules:
+        sys.meta_path.insert(0, _NoBlasProbe())
 
 
 _use_kernel_cache()

@@ -61,3 +61,47 @@ def test_the_command_runs_with_an_unusable_cache_folder(tmp_path):
     warnings = [line for line in r.stderr.splitlines() if "warning" in line]
     assert any("cannot use the cache folder" in w for w in warnings), r.stderr
     assert all(w.startswith("relray: warning: ") for w in warnings), r.stderr
+
+
+_PROBE = """
+import sys
+{before}
+import numpy as np
+import relray.core
+from numba import njit
+
+@njit
+def twice(a):
+    return 2.0 * a
+
+twice(1.0)  # numba loads its NumPy support (and probes for BLAS) here
+import numba.np.arraymath as am
+loaded = "scipy.linalg" in sys.modules
+
+@njit
+def dot(a, b):
+    return np.dot(a, b)
+
+import scipy.linalg
+print(loaded, am._HAVE_BLAS, dot(np.arange(3.0), np.ones(3)), scipy.linalg.norm([3.0, 4.0]))
+"""
+
+
+def _probe(before: str) -> str:
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _PROBE.format(before=before)],
+                         capture_output=True, text=True, check=True, timeout=600)
+    return out.stdout.split()
+
+
+def test_numbas_blas_probe_does_not_import_scipy_and_blas_still_works():
+    """numba's first load probes for BLAS by importing scipy.linalg (0.13 s of the first
+    image): relray answers it "none" without the import; a kernel that calls BLAS
+    (np.dot) still compiles and runs, and scipy.linalg imports as usual afterwards."""
+    assert _probe("") == ["False", "False", "3.0", "5.0"]
+
+
+def test_the_probe_is_left_alone_where_scipy_linalg_is_already_loaded():
+    assert _probe("import scipy.linalg") == ["True", "True", "3.0", "5.0"]

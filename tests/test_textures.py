@@ -170,7 +170,7 @@ def test_texel_reflectance_is_the_tables_blend_of_sigmoids_bit_for_bit():
         tx.texel_reflectance(rgb[i], False, scale, data, lamu, i, 0.25, 0.75, 4, rho)
         lo, hi = rgb_table.SIGMOID_BAND_NM
         assert list(rho) == [0.25 if x < lo else 0.75 if x > hi else w
-                             for x, w in zip(lam, want)], i
+                             for x, w in zip(lam, want, strict=True)], i
     tx.texel_reflectance(rgb[0], True, scale, data, lamu, 0, math.nan, math.nan, 3, rho)
     assert list(rho[:3]) == list(rgb[0])
 
