@@ -126,6 +126,20 @@ def test_wrap_modes_beyond_the_right_edge(tmp_path, wrap, expect_col):
     assert look(t, -0.5 / 4, 0.5)[0] == pytest.approx(want)
 
 
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 5, 8, 12, 256])
+def test_wrap_index_of_every_mode_and_size(n):
+    """repeat is i mod n (power-of-two sizes by a mask, others by division), clamp
+    [0, n-1], mirror the period-2n reflection, for indices several periods either side."""
+    from numba import njit
+
+    wrap = njit(lambda i, size, mode: tx.wrap_index(i, size, mode))
+    for i in range(-3 * n - 2, 3 * n + 3):
+        k = i % (2 * n)
+        assert wrap(i, n, 0) == i % n, (i, n)
+        assert wrap(i, n, 1) == min(max(i, 0), n - 1), (i, n)
+        assert wrap(i, n, 2) == min(k, 2 * n - 1 - k), (i, n)
+
 def test_mip_level_selection_and_blend(tmp_path):
     """lod 0 is the image, lod = levels - 1 (and beyond) the mean, a fractional lod the
     linear mix of the two levels around it."""

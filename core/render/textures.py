@@ -336,8 +336,11 @@ def bounce_spread(spread, alpha, delta):
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def wrap_index(i, n, mode):
-    """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2). Selects, no
-    branches (module note below)."""
+    """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2); a repeat of
+    a power-of-two size n is i & (n - 1) (two's complement: the same as i mod n, without
+    the divisions)."""
+    if mode == 0 and (n & (n - 1)) == 0:
+        return i & (n - 1)
     r = i - n * math.floor(i / n)
     k = i - 2 * n * math.floor(i / (2 * n))
     m = min(k, 2 * n - 1 - k)
