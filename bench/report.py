@@ -1743,6 +1743,59 @@ def shadow_embree_ns(d) -> float | None:
     return d["embree_floor"][0]["embree_occluded_ns"] * t["occluded_rays"] / t["paths"]
 
 
+
+def _textured_lanes_bullet(add, d) -> None:
+    """The 2026-11-27 round: image textures in the SIMD lanes, the texel spectrum as one
+    vector loop, and the first image's BLAS probe."""
+    eq = [r for r in d["peer_equal_error"]
+          if r["scene"] == "textured" and r["metric"] == "rel_mse"]
+    ratio = {(r["peer"], int(r["level_index"])): float(r["ratio_relray_over_peer"])
+             for r in eq}
+    peers = "; ".join(
+        f"{name} {ratio[(peer, 0)]:.2f} / {ratio[(peer, 1)]:.2f}"
+        for peer, name in (("llvm_ad_spectral", "`llvm_ad_spectral`"),
+                           ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
+        if (peer, 0) in ratio and (peer, 1) in ratio)
+    prof = {r["scene"]: r for r in d["profile_scenes"] if r["stage"] == "total"}
+    tex_ns = (f"{float(prof['textured']['ns_per_path']):.0f} ns per path in the per-scene "
+              "profile (1730 before)" if "textured" in prof else "")
+    add("- **Image textures in the SIMD lanes** (`render/lane_paths.py`, 2026-11-27 "
+        "02:20; last round's next step 1, in part): a static textured scene without a "
+        "map (the textured box, the default fly-by) is now traced sixteen paths at a "
+        "time. The base colour, roughness, normal and emission lookups are a lane loop of "
+        "their own (`texture_lanes`, after the vectorised shading of the hits: scalar "
+        "calls per lane, so the other loops stay 16-lane code), each lane carries its ray "
+        "cone; a third compile flag (`lane_paths.kernel(smooth, general, textured)`), "
+        "and the warm-up renders the fly-by's kind. `tests/test_lane_paths.py` checks "
+        "path by path against whole paths and the wavefront (base, roughness, normal and "
+        "emission textures; smooth shading under a normal map; spectral and rgb; β 0 and "
+        "0.6; depth 2 and 8); four mutations were caught. With it, a texel's spectrum at "
+        "the four lanes is one vector loop (`textures.cell_reflectance4`: the 8 table "
+        "nodes' 32 sigmoids in zmm registers, bit for bit `rgb_table.cell_reflectance`'s "
+        "values, `tests/test_textures.py`; the stack memory of the lanes moved to "
+        "`render/stack.py`), a lookup on a mip level reads that level alone, and a "
+        "repeated power-of-two texture wraps by a mask instead of two divisions. The "
+        "renderer's CPU per path on the textured box, each step against the one before "
+        "(`python -m relray.bench.ab REV --scene textured`, 6 alternated pairs, 128², 16 "
+        "spp, 1 thread): the lanes **0.92×** (quartiles 0.89–0.94; 1628 → 1481 ns, "
+        "02:22), the vector spectrum and the level read **0.90×** (0.87–0.93, 02:27), the "
+        "mask **0.95×** (0.92–1.01, 02:40); all three against the code before them "
+        "(`bench.ab b16c5c2 --scene textured`, 03:05) **0.81×** (0.80–0.83; 1630 → 1326 "
+        "ns)"
+        + (f"; {tex_ns}" if tex_ns else "")
+        + (". Equal-error CPU time on the textured box at the high / low level (§2, "
+           f"relative MSE): {peers}: the `llvm_ad_spectral` goal is now met there (1.08 / "
+           "0.75 before)" if peers else "")
+        + ". Tried and dropped: prefetching every lane's texels before the lookups (a "
+        "first pass over the lanes): **1.20×**, slower (02:34): the lookups are bound by "
+        "their arithmetic more than by memory; the environment map's CDF searched by a "
+        "branch-free bisection: 1.02× (02:45; the benchmark map's searches are "
+        "predictable, its sun holds most of the power). And the first image: numba "
+        "probes for BLAS at its first load by importing scipy.linalg (0.13 s); no "
+        "kernel calls BLAS, so relray answers the probe \"none\" without the import "
+        "(`core/__init__.py`, `tests/test_core.py`): numba.np.arraymath's import 0.145 → "
+        "0.009 s (cProfile of a warm `relray render`).")
+
 def _section_recommendations(add, d) -> None:
     add("## What changed in this round, and what stands in the way\n")
     if not d["profile"]:
@@ -1755,6 +1808,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _textured_lanes_bullet(add, d)
     if lane_rows:
         c = lane_rows.get("cornell", next(iter(lane_rows.values())))
         per = "; ".join(
@@ -1777,7 +1831,7 @@ def _section_recommendations(add, d) -> None:
             "vectorised nothing while the lanes' arrays were on the heap (LLVM could not "
             "rule out that the loops' stores alias the scene's tables they gather from: "
             "\"unsafe dependent memory operations\"), so the lanes' arrays are stack "
-            "memory made by a numba intrinsic (`lane_paths._stack`: no owner, no reference "
+            "memory made by a numba intrinsic (now `stack.stack_array`: no owner, no reference "
             "counting, so the kernel compiles with `_nrt=False`); the loops are inlined "
             "functions of fewer than 30 arguments (Python 3.11 passes more as `*args`, "
             "which numba's inliner refuses); `sincos_2pi`'s quadrant and the triangle "
@@ -2018,13 +2072,16 @@ def _section_recommendations(add, d) -> None:
             f"wavelengths {_ns(d, 'camera:', 'hero:'):.0f} ns; the film "
             f"{_ns(d, 'film:'):.0f} ns.\n")
     add("Next steps, by expected gain:\n")
-    add("1. **SIMD lanes for the other kinds of scene**: image textures (the texel "
-        "lookups as gathers: the atlas descriptors, the mip level, four texels and their "
-        "spectral upsampling per lane), moving bodies (each body's rest-frame rays as a "
-        "packet of its own, the frame changes as lane arithmetic) and the environment "
-        "map (its `atan2`/`acos` and the sampler's searches need vector forms first: "
-        "polynomial arcs as `sincos_2pi` has, a guide table for the CDFs); then the "
-        "textured, moving and environment-lit scenes would follow the box.")
+    add("1. **SIMD lanes for the other kinds of scene**: moving bodies (each body's "
+        "rest-frame rays as a packet of its own, the frame changes as lane arithmetic) "
+        "and the environment map (its `atan2`/`acos` and the sampler's searches need "
+        "vector forms first: polynomial arcs as `sincos_2pi` has, a guide table for the "
+        "CDFs); then the moving and environment-lit scenes would follow the box. The "
+        "textured box takes the lanes since 2026-11-27, its lookups scalar calls per "
+        "lane (the textured box's texture work is still about half its CPU per path: "
+        "1326 against the plain box's 669 ns); the lookups as gathers (the atlas "
+        "descriptors, the mip level, four texels per lane) would be the next step "
+        "there.")
     add("2. **A packed record per triangle for the lanes' hit gathers** (the heavy "
         "scene): vertex, edges, normal, area, light pmf and material in one 64-byte row "
         "instead of seven tables, one cache miss per hit instead of up to seven; by hand "
