@@ -95,18 +95,8 @@ from .sampling import (
 )
 from .stack import stack_array
 from .textures import (
-    BASE,
-    EMISSION,
-    NORMAL,
-    ROUGHNESS,
-    base_texel,
     bounce_spread,
-    hit_lod,
-    normal_texel,
-    scalar_texel,
-    slot_texel,
     texel_reflectance,
-    triangle_uv,
 )
 
 _INV_PI = 1.0 / math.pi
@@ -210,22 +200,20 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
 @njit(**_LANES)
 def texture_lanes(geo, tex, mats, nlanes, hit, hitf, lanes, bounce, cones,
                   scratch):  # pragma: no cover - compiled
-    """The image textures of the packet's hits, lane by lane (:mod:`.whole_paths`' block,
-    :func:`.integrator.shade`'s for Lambert materials), after :func:`shade_hits`: at the
-    ray cone's width W + β t the hit's level of detail (:func:`.textures.hit_lod`); the
-    base colour's texel spectrum for ρ(λ) (:func:`.textures.texel_reflectance` at the
-    lane's wavelengths), a normal map's normal for n, an emission texel (MIS weight 1)
-    into ``acc``, the roughness for the cone; then the cone goes on from the hit
+    """The image textures of the packet's hits, lane by lane, after :func:`shade_hits`:
+    :func:`.whole_paths.lambert_texels` at the ray cone's width W + β t; the base
+    colour's texel spectrum for ρ(λ) (:func:`.textures.texel_reflectance` at the lane's
+    wavelengths), a normal map's normal for n, an emission texel (MIS weight 1) into
+    ``acc``, the roughness for the cone; then the cone goes on from the hit
     (width W + β t, spread :func:`.textures.bounce_spread`). The lookups are scalar calls
     (a loop of its own, so :func:`shade_hits` stays vector code); the sixteen lanes'
     independent lookups overlap their cache misses. ``cones``: (width, spread) rows and
     the lanes' table coordinates (W, 4); ``scratch``: one lane's base colour, ρ, and its
     throughput, columns, emission and table coordinates for
     :func:`.whole_paths.texture_emission`."""
-    v0, e1, e2, ng, area, tri_mat, vn, has_vn = geo
-    (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
-     t_mat_flag, t_nscale, t_estr, _, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65, t_rgb, _,
-     _, _) = tex
+    _, e1, e2, ng, area, tri_mat, vn, has_vn = geo
+    (_, _, _, _, _, _, _, _, t_mat_flag, _, t_estr, _, t_uvir, _, t_cscale, t_cdata, t_d65,
+     t_rgb, _, _, _) = tex
     mat_alpha, emit, one_sided = mats
     path, _, _, ray, thr, li, lf, acc, _ = lanes
     _, gn, nrm, _, rho, _, _, _, _, _ = bounce
@@ -244,37 +232,22 @@ def texture_lanes(geo, tex, mats, nlanes, hit, hitf, lanes, bounce, cones,
         a = np.float64(mat_alpha[m])
         cone_w = cone[0, lane] + cone[1, lane] * hitf[TFAR * W + lane]
         if t_mat_flag[m] != 0:
-            uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
-            lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
-            if t_mat_tex[m, BASE] >= 0:
-                base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                           t_mat_lod, m, uv[0], uv[1], lod, alb)
+            tex_base, a, n, lit, etex = whole_paths.lambert_texels(
+                tex, (area, e1, e2, ng, vn, has_vn), m, tri, b1, b2, cos_g, g, (dx, dy, dz),
+                cone_w, front or one_sided[m] == 0, a,
+                (nrm[0, lane], nrm[1, lane], nrm[2, lane]), alb)
+            nrm[0, lane], nrm[1, lane], nrm[2, lane] = n
+            if tex_base:
                 texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamw, lane, t_uvir[m, 0],
                                   t_uvir[m, 1], nlanes, rho1)
                 for j in range(nlanes):
                     rho[j, lane] = rho1[j]
-            if t_mat_tex[m, ROUGHNESS] >= 0:
-                r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
-                                  t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0], uv[1],
-                                  lod)
-                a = max(r_ * r_, 1e-4)
-            if t_mat_tex[m, NORMAL] >= 0:
-                n0 = (ng[tri, 0], ng[tri, 1], ng[tri, 2])
-                if has_vn:
-                    n0 = vertex_normal(vn, tri, b1, b2)
-                nrm[0, lane], nrm[1, lane], nrm[2, lane] = shading_normal(
-                    normal_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                                 t_mat_lod, m, uv[0], uv[1], lod, t_nscale[m], n0, e1, e2, tri,
-                                 duv1, duv2), g, dx, dy, dz)
-            if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
+            if lit:
                 for j in range(4):
                     thr1[j], li1[j], lf1[j] = thr[j, lane], li[j, lane], lf[j, lane]
                     em[0, j], lam1[0, j] = 0.0, lamw[lane, j]
-                whole_paths.texture_emission(
-                    em, 0, thr1, li1, lf1, lam1, nlanes, t_rgb, t_estr[m], emit, t_d65,
-                    t_cscale, t_cdata, slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                                  t_mat_factor, t_mat_lod, m,
-                                                  np.int64(EMISSION), uv[0], uv[1], lod))
+                whole_paths.texture_emission(em, 0, thr1, li1, lf1, lam1, nlanes, t_rgb,
+                                             t_estr[m], emit, t_d65, t_cscale, t_cdata, etex)
                 for j in range(4):
                     acc[j, lane] += em[0, j]
         cone[0, lane] = cone_w

@@ -179,9 +179,8 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
         rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
         # the texture table's arrays as locals (read from the tuple in the loop, each access
         # would count a reference)
-        (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
-         t_mat_flag, t_nscale, t_estr, _, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65, t_rgb, _,
-         _, _) = tex
+        (_, _, _, _, _, _, _, _, t_mat_flag, _, t_estr, _, t_uvir, _, t_cscale, t_cdata, t_d65,
+         t_rgb, _, _, _) = tex
         alb = np.zeros(3, np.float64)  # a base-colour texel (linear Rec.709)
         top = emit.shape[1] - 1
         rgb = nlanes == 3
@@ -297,39 +296,21 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 if has_vn:
                     n = shading_normal(vertex_normal(vn, tri, b1, b2), g, dx, dy, dz)
                 m = tri_mat[tri]
-                # image textures (:func:`.integrator.shade`'s block, for Lambert materials):
-                # the base colour, the roughness (the cone's spread), the normal, the emission
+                # image textures (lambert_texels: integrator.shade's block for Lambert
+                # materials): the base colour, the roughness (the cone's spread), the
+                # normal, the emission
                 tex_base = False
                 a = cone_w = 0.0
                 if with_tex:  # (a scene without textures skips the block and the cones)
                     a = np.float64(mat_alpha[m])
                     cone_w = cone0 + cone1 * t
                 if with_tex and t_mat_flag[m] != 0:
-                    uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
-                    lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
-                    if t_mat_tex[m, BASE] >= 0:
-                        base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                                   t_mat_lod, m, uv[0], uv[1], lod, alb)
-                        tex_base = True
-                    if t_mat_tex[m, ROUGHNESS] >= 0:
-                        r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
-                                          t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0],
-                                          uv[1], lod)
-                        a = max(r_ * r_, 1e-4)
-                    if t_mat_tex[m, NORMAL] >= 0:
-                        n0 = (g[0], g[1], g[2]) if front else (-g[0], -g[1], -g[2])
-                        if has_vn:
-                            n0 = vertex_normal(vn, tri, b1, b2)
-                        n = shading_normal(normal_texel(t_atlas, t_desc, t_rows, t_mat_tex,
-                                                        t_mat_uv, t_mat_factor, t_mat_lod, m, uv[0],
-                                                        uv[1], lod, t_nscale[m], n0, e1, e2, tri,
-                                                        duv1, duv2), g, dx, dy, dz)
-                    if t_mat_tex[m, EMISSION] >= 0 and (front or one_sided[m] == 0):
+                    tex_base, a, n, lit, etex = lambert_texels(
+                        tex, (area, e1, e2, ng, vn, has_vn), m, tri, b1, b2, cos_g, g,
+                        (dx, dy, dz), cone_w, front or one_sided[m] == 0, a, n, alb)
+                    if lit:
                         texture_emission(L, i, thr, li, lf, lam, nlanes, t_rgb, t_estr[m], emit,
-                                         t_d65, t_cscale, t_cdata,
-                                         slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                                    t_mat_factor, t_mat_lod, m, np.int64(EMISSION),
-                                                    uv[0], uv[1], lod))
+                                         t_d65, t_cscale, t_cdata, etex)
                 er = emit_row[m]
                 if er >= 0 and (front or one_sided[m] == 0):
                     wt = 1.0
@@ -520,6 +501,51 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
         return n_rays, n_sh
 
     return lambert_paths
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, alb):
+    """The image textures of a Lambert hit (material m, triangle ``tri`` at barycentrics
+    (b1, b2); ``g`` the geometric normal turned towards the ray ``d``, cos θ_g of the
+    unturned one; ``cone_w`` the ray cone's width there; :func:`.integrator.shade`'s
+    texture block for Lambert materials): at the level of detail of the cone
+    (:func:`.textures.hit_lod`) the base colour's texel into ``alb`` (linear Rec.709),
+    the roughness α = r² (≥ 1e-4; the cone's spread after the bounce), a normal map's
+    normal about the interpolated (or geometric) front normal, on g's side
+    (:func:`.integrator.shading_normal`), and where the face emits (``emits``) the
+    emission texel. Returns (base colour read, α, n, emission read, emission texel);
+    ``a`` and ``n`` pass through where the material has no such texture. ``geo``: (area,
+    e1, e2, ng, vn, has_vn). Shared by the whole paths and the SIMD lanes
+    (:func:`.lane_paths.texture_lanes`), inlined into both (a call would copy the texture
+    table's 21 array structures: 1.15× the textured box's CPU per path); the lookups it
+    makes are compiled apart."""
+    (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod, _,
+     t_nscale, _, _, _, t_tri_uv, _, _, _, _, _, _, _) = tex
+    area, e1, e2, ng, vn, has_vn = geo
+    uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
+    lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
+    base = t_mat_tex[m, BASE] >= 0
+    if base:
+        base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor, t_mat_lod, m,
+                   uv[0], uv[1], lod, alb)
+    if t_mat_tex[m, ROUGHNESS] >= 0:
+        r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor,
+                          t_mat_lod, m, np.int64(ROUGHNESS), uv[0], uv[1], lod)
+        a = max(r_ * r_, 1e-4)
+    if t_mat_tex[m, NORMAL] >= 0:
+        n0 = (ng[tri, 0], ng[tri, 1], ng[tri, 2])
+        if has_vn:
+            n0 = vertex_normal(vn, tri, b1, b2)
+        n = shading_normal(normal_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                        t_mat_factor, t_mat_lod, m, uv[0], uv[1], lod,
+                                        t_nscale[m], n0, e1, e2, tri, duv1, duv2), g, d[0],
+                           d[1], d[2])
+    lit = emits and t_mat_tex[m, EMISSION] >= 0
+    etex = (0.0, 0.0, 0.0, 0.0)
+    if lit:
+        etex = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                          t_mat_lod, m, np.int64(EMISSION), uv[0], uv[1], lod)
+    return base, a, n, lit, etex
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
