@@ -16,8 +16,7 @@ point, spot and sun lights or a constant sky, with or without image textures, wi
 environment map (its lookups are libm calls and table searches that stay scalar: an
 environment-lit scene traced in lanes cost 1.00× its whole paths, so it keeps them).
 Image textures (base colour, roughness, normal, emission) are a lane loop of their own
-(:func:`texture_lanes`: scalar calls per lane, whose cache misses overlap), so the
-other loops stay vector code.
+(:func:`texture_lanes`: scalar calls per lane), so the other loops stay vector code.
 
 What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
 (:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
@@ -198,7 +197,7 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
 
 
 @njit(**_LANES)
-def texture_lanes(geo, tex, mats, nlanes, hit, hitf, lanes, bounce, cones,
+def texture_lanes(geo, tex, mats, nlanes, lamu, hit, hitf, lanes, bounce, cone,
                   scratch):  # pragma: no cover - compiled
     """The image textures of the packet's hits, lane by lane, after :func:`shade_hits`:
     :func:`.whole_paths.lambert_texels` at the ray cone's width W + β t; the base
@@ -206,18 +205,16 @@ def texture_lanes(geo, tex, mats, nlanes, hit, hitf, lanes, bounce, cones,
     wavelengths), a normal map's normal for n, an emission texel (MIS weight 1) into
     ``acc``, the roughness for the cone; then the cone goes on from the hit
     (width W + β t, spread :func:`.textures.bounce_spread`). The lookups are scalar calls
-    (a loop of its own, so :func:`shade_hits` stays vector code); the sixteen lanes'
-    independent lookups overlap their cache misses. ``cones``: (width, spread) rows and
-    the lanes' table coordinates (W, 4); ``scratch``: one lane's base colour, ρ, and its
-    throughput, columns, emission and table coordinates for
-    :func:`.whole_paths.texture_emission`."""
+    (a loop of its own, so :func:`shade_hits` stays vector code). ``lamu``: the paths'
+    table coordinates (a lane's are row ``path[lane]``); ``cone``: the lanes' (width,
+    spread) rows; ``scratch``: one lane's base colour, ρ, and its throughput, columns,
+    emission and table coordinates for :func:`.whole_paths.texture_emission`."""
     _, e1, e2, ng, area, tri_mat, vn, has_vn = geo
     (_, _, _, _, _, _, _, _, t_mat_flag, _, t_estr, _, t_uvir, _, t_cscale, t_cdata, t_d65,
      t_rgb, _, _, _) = tex
     mat_alpha, emit, one_sided = mats
     path, _, _, ray, thr, li, lf, acc, _ = lanes
     _, gn, nrm, _, rho, _, _, _, _, _ = bounce
-    cone, lamw = cones
     alb, rho1, thr1, li1, lf1, em, lam1 = scratch
     for lane in range(W):
         if path[lane] < 0 or hit[GEOM * W + lane] == _INVALID:
@@ -238,14 +235,14 @@ def texture_lanes(geo, tex, mats, nlanes, hit, hitf, lanes, bounce, cones,
                 (nrm[0, lane], nrm[1, lane], nrm[2, lane]), alb)
             nrm[0, lane], nrm[1, lane], nrm[2, lane] = n
             if tex_base:
-                texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamw, lane, t_uvir[m, 0],
-                                  t_uvir[m, 1], nlanes, rho1)
+                texel_reflectance(alb, t_rgb, t_cscale, t_cdata, lamu, path[lane],
+                                  t_uvir[m, 0], t_uvir[m, 1], nlanes, rho1)
                 for j in range(nlanes):
                     rho[j, lane] = rho1[j]
             if lit:
                 for j in range(4):
                     thr1[j], li1[j], lf1[j] = thr[j, lane], li[j, lane], lf[j, lane]
-                    em[0, j], lam1[0, j] = 0.0, lamw[lane, j]
+                    em[0, j], lam1[0, j] = 0.0, lamu[path[lane], j]
                 whole_paths.texture_emission(em, 0, thr1, li1, lf1, lam1, nlanes, t_rgb,
                                              t_estr[m], emit, t_d65, t_cscale, t_cdata, etex)
                 for j in range(4):
@@ -405,10 +402,9 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
         nee = stack_array(4, 16, np.float64)
         alive = stack_array(1, 16, np.bool_)[0]
         cont = stack_array(1, 16, np.bool_)[0]
-        # with textures: the ray cones (width, spread), the lanes' table coordinates, one
-        # lane's values for the texture calls (texture_lanes)
+        # with textures: the ray cones (width, spread), one lane's values for the
+        # texture calls (texture_lanes)
         cone = stack_array(2, 16, np.float64)
-        lamw = stack_array(16, 4, np.float32)
         scratch = (stack_array(1, 3, np.float64)[0], stack_array(1, 4, np.float64)[0],
                    stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.int64)[0],
                    stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.float32),
@@ -428,7 +424,7 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
                 ua[c, lane], cone[c, lane] = 0.0, 0.0
             for j in range(4):
                 thr[j, lane], li[j, lane], lf[j, lane], acc[j, lane] = 0.0, 0, 0.0, 0.0
-                rho[j, lane], nee[j, lane], lamw[lane, j] = 0.0, 0.0, 0.0
+                rho[j, lane], nee[j, lane] = 0.0, 0.0
         geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn)
         mats = (refl, emit, emit_row, one_sided, tri_pmf, l_kind, l_prim, l_pos, l_dir, l_row,
                 l_scale, l_spot, l_cdf, sky_pmf, sky_row)
@@ -460,8 +456,6 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
                     prev_pdf[lane] = 0.0
                     if textured:
                         cone[0, lane], cone[1, lane] = 0.0, np.float64(spread[i])
-                        for j in range(4):
-                            lamw[lane, j] = lamu[i, j]
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
                     busy += 1
@@ -477,8 +471,8 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
             shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce,
                        smooth, general)
             if textured:
-                texture_lanes(geo, tex, (mat_alpha, emit, one_sided), nlanes, hit, hitf, lanes,
-                              bounce, (cone, lamw), scratch)
+                texture_lanes(geo, tex, (mat_alpha, emit, one_sided), nlanes, lamu, hit, hitf,
+                              lanes, bounce, cone, scratch)
             pick_lights(l_cdf, ua, pos)
             sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general)
             for lane in range(W):

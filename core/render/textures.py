@@ -571,14 +571,12 @@ def cell_reflectance4(data, cell, lam):
     c2g, big, zi, yi, xi, fz, fy, fx = cell
     x = stack_array(1, 32, np.float64)[0]  # x of node k at lane j, then its s
     wk = stack_array(1, 8, np.float64)[0]
+    if not math.isnan(c2g):  # a grey: c0 = c1 = 0, so x = c2 and s is flat in λ (no cell)
+        s = 0.5 + 0.5 * c2g / math.sqrt(1.0 + c2g * c2g)
+        return s, s, s, s
     t = stack_array(1, 4, np.float64)[0]
     for j in range(4):
         t[j] = band_coordinate(lam[j])
-    if not math.isnan(c2g):  # a grey: its closed-form sigmoid, c0 = c1 = 0 (no cell)
-        for j in range(4):
-            x[j] = (0.0 * t[j] + 0.0) * t[j] + c2g
-            x[j] = 0.5 + 0.5 * x[j] / math.sqrt(1.0 + x[j] * x[j])
-        return x[0], x[1], x[2], x[3]
     k = 0
     for dz in range(2):
         wz = fz if dz else 1.0 - fz
