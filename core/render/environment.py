@@ -73,6 +73,8 @@ from numba import njit
 from ..physics import spectrum
 from ..physics.rgb_table import coefficients, lambda_of_column, sigmoid_reflectance
 from ..scene.sky import EnvironmentImage
+from .arcs import arccos, arctan2
+from .sampling import sincos_2pi
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance weights
 #: A spectral texel's sampling weight beside its luminance: this share of its mean band
@@ -235,38 +237,62 @@ def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> K
 # the map 250 -> 175 ns, a light sample 185 -> 140 ns).
 
 
-@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def direction_to_uv(x, y, z, rot):
-    """Map coordinates (u, v) ∈ [0, 1)² × [0, 1] of the unit lab direction (x, y, z)."""
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def uv_of(x, y, z, rot):
+    """Map coordinates (u, v) ∈ [0, 1)² × [0, 1] of the unit lab direction (x, y, z)
+    (polynomial ``acos``/``atan2``, :mod:`.arcs`: straight-line code that the SIMD lanes
+    vectorise)."""
     cz = min(max(np.float64(z), -1.0), 1.0)
-    v = 1.0 - math.acos(cz) * INV_PI
-    u = (math.pi + rot - math.atan2(np.float64(y), np.float64(x))) * INV_TWO_PI
+    v = 1.0 - arccos(cz) * INV_PI
+    u = (math.pi + rot - arctan2(np.float64(y), np.float64(x))) * INV_TWO_PI
     return u - math.floor(u), v
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def direction_to_uv(x, y, z, rot):
+    """:func:`uv_of`, compiled apart (one path at a time)."""
+    return uv_of(x, y, z, rot)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def direction_of(u, v, rot):
+    """The unit lab direction of map coordinates (u, v) and its sin θ: θ = π(1 − v),
+    φ = π + ρ − 2πu, by :func:`.sampling.sincos_2pi` of θ/2π and φ/2π (mod 1)."""
+    ct, st = sincos_2pi(0.5 * (1.0 - v))
+    f = 0.5 + rot * INV_TWO_PI - u
+    cp, sp = sincos_2pi(f - math.floor(f))
+    return (st * cp, st * sp, ct), st
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def uv_to_direction(u, v, rot):
-    """The unit lab direction of map coordinates (u, v) and its sin θ."""
-    theta = math.pi * (1.0 - v)
-    phi = math.pi + rot - 2.0 * math.pi * u
-    st = math.sin(theta)
-    return (st * math.cos(phi), st * math.sin(phi), math.cos(theta)), st
+    """:func:`direction_of`, compiled apart."""
+    return direction_of(u, v, rot)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def env_bilinear(tex, rot, x, y, z):
     """The 2 × 2 texels around the lab direction (x, y, z) and its weights, for the
-    bilinear lookup of the map seen directly (texel centres at ((c + ½)/W, (r + ½)/H);
-    columns wrap around, rows clamp at the poles): (r0, r1, c0, c1, fy, fx), the value
-    being (1−fy)((1−fx) L[r0,c0] + fx L[r0,c1]) + fy((1−fx) L[r1,c0] + fx L[r1,c1])."""
-    h, w = tex.shape[0], tex.shape[1]
-    u, v = direction_to_uv(x, y, z, rot)
+    bilinear lookup of the map seen directly (:func:`bilinear_of`)."""
+    u, v = uv_of(x, y, z, rot)
+    return bilinear_of(tex.shape[0], tex.shape[1], u, v)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def bilinear_of(h, w, u, v):
+    """The 2 × 2 texels of an H × W map around the map coordinates (u, v) ∈ [0, 1]² and
+    their weights (texel centres at ((c + ½)/W, (r + ½)/H); columns wrap around, rows
+    clamp at the poles): (r0, r1, c0, c1, fy, fx), the value being
+    (1−fy)((1−fx) L[r0,c0] + fx L[r0,c1]) + fy((1−fx) L[r1,c0] + fx L[r1,c1]).
+    Straight-line code (the wrap of c0 ∈ [−1, W − 1] by selects)."""
     cx = u * w - 0.5
     ry = min(max(v * h - 0.5, 0.0), h - 1.0)
     c0 = int(math.floor(cx))
     fx = cx - c0
     r0 = min(int(ry), h - 1)
-    return r0, min(r0 + 1, h - 1), c0 % w, (c0 + 1) % w, ry - r0, fx
+    c1 = c0 + 1
+    return (r0, min(r0 + 1, h - 1), c0 + w if c0 < 0 else c0, c1 - w if c1 >= w else c1,
+            ry - r0, fx)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
@@ -337,6 +363,17 @@ def _texel_lanes(tex, r, c, rgb, nm, lam, base):
             k * base[3] * sigmoid_reflectance(c0, c1, c2, lam[3]))
 
 
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def row_value(row, rgb, j, lam, base):
+    """Lane ``j``'s radiance of a colour map's texel whose (c0, c1, c2, k) (rgb mode
+    (r, g, b, 1)) are ``row`` (the SIMD lanes' form of :func:`env_lanes`, no bands): the
+    rgb mode its channel j, else k · E(λ) · s(λ; c) at the lane's λ (nm) and E(λ)
+    ``base``; straight-line code."""
+    value = row[3] * base * sigmoid_reflectance(row[0], row[1], row[2], lam)
+    channel = row[0] if j == 0 else (row[1] if j == 1 else row[2])  # (static indices)
+    return channel if rgb else value
+
+
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def band_value(tex, r, c, nm, lam):
     """Texel (r, c)'s spectral radiance at λ (nm): its bands at ``nm`` interpolated
@@ -349,17 +386,25 @@ def band_value(tex, r, c, nm, lam):
     return (1.0 - f) * np.float64(tex[r, c, k - 1]) + f * np.float64(tex[r, c, k])
 
 
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def texel_pdf_of(pmf, u, v, z):
+    """(row, column, solid-angle density) at map coordinates (u, v) of a lab direction
+    whose z component is ``z``: the texel they fall in and p_t H W / (2π² sin θ),
+    sin θ = √(1 − z²) (0 at the poles); straight-line code."""
+    h, w = pmf.shape[0], pmf.shape[1]
+    r, c = min(int(v * h), h - 1), min(int(u * w), w - 1)
+    cz = min(max(np.float64(z), -1.0), 1.0)
+    st = math.sqrt(max(0.0, 1.0 - cz * cz))  # (numba's ** 2 is a loop: not vectorised)
+    pdf = np.float64(pmf[r, c]) * h * w / (TWO_PI_SQ * st)
+    return r, c, pdf if st > 0.0 else 0.0
+
+
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def env_texel_pdf(pmf, rot, x, y, z):
     """(row, column, :func:`env_pdf`) of the lab direction (x, y, z): the texel it sees
-    and the solid-angle density there, from one (u, v)."""
-    h, w = pmf.shape[0], pmf.shape[1]
-    u, v = direction_to_uv(x, y, z, rot)
-    r, c = min(int(v * h), h - 1), min(int(u * w), w - 1)
-    st = math.sqrt(max(0.0, 1.0 - min(max(np.float64(z), -1.0), 1.0) ** 2))
-    if st <= 0.0:
-        return r, c, 0.0
-    return r, c, np.float64(pmf[r, c]) * h * w / (TWO_PI_SQ * st)
+    and the solid-angle density there, from one (u, v) (:func:`texel_pdf_of`)."""
+    u, v = uv_of(x, y, z, rot)
+    return texel_pdf_of(pmf, u, v, z)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
@@ -374,9 +419,24 @@ def _pick(cdf, u):
     """(k, fraction) with cdf[k] <= u < cdf[k + 1] and u's place inside it."""
     n = len(cdf) - 1
     k = min(max(np.searchsorted(cdf, u, side="right") - 1, 0), n - 1)
-    lo, hi = cdf[k], cdf[k + 1]
+    return k, place(cdf[k], cdf[k + 1], u)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def place(lo, hi, u):
+    """u's place inside the CDF's step [lo, hi): (u − lo)/(hi − lo) (½ for an empty
+    step), clamped to [0, 1 − 1e-7]."""
     f = (u - lo) / (hi - lo) if hi > lo else 0.5
-    return k, min(max(f, 0.0), 1.0 - 1e-7)
+    return min(max(f, 0.0), 1.0 - 1e-7)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def sample_pdf(pmf, r, c, st):
+    """The solid-angle density of :func:`env_sample` at texel (r, c) where sin θ = st:
+    p_t H W / (2π² st) (0 at a pole)."""
+    h, w = pmf.shape[0], pmf.shape[1]
+    pdf = np.float64(pmf[r, c]) * h * w / (TWO_PI_SQ * st)
+    return pdf if st > 0.0 else 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
@@ -387,11 +447,8 @@ def env_sample(marg, cond, pmf, rot, u1, u2):
     h, w = pmf.shape[0], pmf.shape[1]
     r, fv = _pick(marg, u1)
     c, fu = _pick(cond[r], u2)
-    wi, st = uv_to_direction((c + fu) / w, (r + fv) / h, rot)
-    pdf = 0.0
-    if st > 0.0:
-        pdf = np.float64(pmf[r, c]) * h * w / (TWO_PI_SQ * st)
-    return wi, pdf, r, c
+    wi, st = direction_of((c + fu) / w, (r + fv) / h, rot)
+    return wi, sample_pdf(pmf, r, c, st), r, c
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)

@@ -259,21 +259,25 @@ _SQRT_HALF = math.sqrt(0.5)
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def sincos_2pi(u):
-    """(cos 2πu, sin 2πu) for u ∈ [0, 1), to about 2e-9, without libm's sincos.
+    """(cos 2πu, sin 2πu) for u ∈ [0, 1), to about 2e-16, without libm's sincos.
 
     4u = q + r (quadrant q, r ∈ [0, 1)); θ = (r - ½)·π/2 ∈ [-π/4, π/4) by Taylor series
-    through θ¹⁰ (truncation ≤ (π/4)¹¹/11! ≈ 2e-9); then the angle q·π/2 + π/4 + θ by
-    exact rotations.  The sampling warps need the angle to this accuracy only; libm's
-    sincos was about a fifth of the shading kernel's time.
+    through θ¹⁶ (truncation ≤ (π/4)¹⁷/17! ≈ 5e-17); then the angle q·π/2 + π/4 + θ by
+    exact rotations.  libm's sincos was about a fifth of the shading kernel's time; the
+    environment map's directions (:func:`.environment.uv_to_direction`) need the full
+    accuracy: near its poles sin θ comes back as √(1 − cos²θ), which a 2e-9 error in
+    cos θ would move by 1e-4 relative (the series stopped at θ¹⁰ before 2026-11-27).
     """
     x = 4.0 * u
     q = math.floor(x)
     t = (x - q - 0.5) * _HALF_PI
     t2 = t * t
-    s = t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0
-                                                               + t2 * (1.0 / 362880.0)))))
-    c = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (
-        1.0 / 40320.0 + t2 * (-1.0 / 3628800.0)))))
+    s = t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (
+        1.0 / 362880.0 + t2 * (-1.0 / 39916800.0 + t2 * (1.0 / 6227020800.0 + t2 * (
+            -1.0 / 1307674368000.0))))))))
+    c = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (1.0 / 40320.0 + t2 * (
+        -1.0 / 3628800.0 + t2 * (1.0 / 479001600.0 + t2 * (-1.0 / 87178291200.0 + t2 * (
+            1.0 / 20922789888000.0))))))))
     # rotate by π/4: (cos, sin)(π/4 + θ)
     c, s = _SQRT_HALF * (c - s), _SQRT_HALF * (c + s)
     # the quadrant by selects, not branches (so a loop over SIMD lanes vectorises): odd

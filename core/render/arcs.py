@@ -1,0 +1,106 @@
+"""Inverse trigonometric functions as straight-line polynomial code, for the SIMD lanes.
+
+libm's ``acos`` and ``atan2`` are calls: a loop over the lanes (:mod:`.lane_paths`) that
+makes one is not vectorised at all. These are selects and a polynomial each, so LLVM
+compiles a loop of them to vector code, and one path at a time they cost less than the
+calls (the environment map's direction → (u, v), :func:`.environment.direction_to_uv`).
+Angles in radians, to within 1e-15 of libm's (``tests/test_arcs.py``).
+
+**arctan2(y, x)**: t = min(|x|, |y|) / max(|x|, |y|) ∈ [0, 1]; above tan(π/8),
+atan t = π/4 + atan((t − 1)/(t + 1)), so the argument s has |s| ≤ tan(π/8) and
+
+    atan s = s + s³ P(s²)     (P of degree 9, relative error ≤ 5e-16 on that interval);
+
+then π/2 − a where |y| > |x|, π − a where x is negative (its sign bit: x = −0 too),
+and y's sign (libm's conventions at the zeros: atan2(±0, −0) = ±π, atan2(±0, +0) = ±0).
+
+**arccos(x)** (|x| ≤ 1): asin s = s + s³ Q(s²) for |s| ≤ ½ (Q of degree 10, relative
+error ≤ 7e-16); acos x = π/2 − asin x for |x| ≤ ½, 2 asin √((1 − x)/2) above ½ and
+π − 2 asin √((1 + x)/2) below −½ (1 ∓ x is exact there).
+
+P and Q are least-squares fits of (atan s − s)/s³ and (asin s − s)/s³ in s² on 6000
+Chebyshev nodes, weighted by s³/f(s) (the final relative error), made with numpy's
+``polyfit`` for this module.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+_ATAN = (-0.33333333333329085, 0.19999999998871204, -0.14285714181660486,
+         0.1111110621800967, -0.09090774107201532, 0.07689968578188999,
+         -0.06640360039477758, 0.056889588811723645, -0.043496458512633555,
+         0.02115289894317583)
+_ASIN = (0.16666666666682714, 0.07499999996309503, 0.04464286007581368,
+         0.030381828568083222, 0.022374808389826587, 0.017314893882214195,
+         0.01431648279962871, 0.009409344048751381, 0.01816880664664346,
+         -0.011560543841850963, 0.03141689999050577)
+_TAN_PI_8 = math.tan(math.pi / 8.0)
+_QUARTER_PI = 0.25 * math.pi
+_HALF_PI = 0.5 * math.pi
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _atan_reduced(s):
+    """atan s for |s| ≤ tan(π/8): s + s³ P(s²) (Horner)."""
+    z = s * s
+    c = _ATAN
+    p = c[9]
+    p = p * z + c[8]
+    p = p * z + c[7]
+    p = p * z + c[6]
+    p = p * z + c[5]
+    p = p * z + c[4]
+    p = p * z + c[3]
+    p = p * z + c[2]
+    p = p * z + c[1]
+    p = p * z + c[0]
+    return s + s * z * p
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _asin_reduced(s):
+    """asin s for |s| ≤ ½: s + s³ Q(s²) (Horner)."""
+    z = s * s
+    c = _ASIN
+    q = c[10]
+    q = q * z + c[9]
+    q = q * z + c[8]
+    q = q * z + c[7]
+    q = q * z + c[6]
+    q = q * z + c[5]
+    q = q * z + c[4]
+    q = q * z + c[3]
+    q = q * z + c[2]
+    q = q * z + c[1]
+    q = q * z + c[0]
+    return s + s * z * q
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def arctan2(y, x):
+    """The angle of (x, y) from +x, in [−π, π], as libm's ``atan2`` (module docstring)."""
+    ax, ay = abs(x), abs(y)
+    hi, lo = max(ax, ay), min(ax, ay)
+    t = lo / hi if hi > 0.0 else 0.0
+    big = t > _TAN_PI_8
+    s = (t - 1.0) / (t + 1.0) if big else t
+    a = _atan_reduced(s)
+    a = a + _QUARTER_PI if big else a
+    a = _HALF_PI - a if ay > ax else a
+    a = math.pi - a if math.copysign(1.0, x) < 0.0 else a
+    return math.copysign(a, y)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def arccos(x):
+    """acos x ∈ [0, π] for |x| ≤ 1 (module docstring)."""
+    ax = abs(x)
+    big = ax > 0.5
+    s = math.sqrt(0.5 * (1.0 - ax)) if big else x
+    a = _asin_reduced(s)
+    r = _HALF_PI - a
+    r = 2.0 * a if big else r
+    return math.pi - r if big and x < 0.0 else r
