@@ -78,10 +78,11 @@ def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     """:data:`LAMBERT_JOB` under a constant sky, with a smooth-shaded sphere, with both,
     without its light, under an environment map, with both and an image texture (the
     default fly-by's kind), with that under the map instead, and with its box moving:
-    the SIMD lanes (``render/lane_paths.py``: :data:`LAMBERT_JOB` itself, the first three
-    and the textured one) and the whole-path kernel (the others) are compiled apart for
-    each kind (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map and 2 × 2
-    texture are written into ``folder``."""
+    the SIMD lanes (``render/lane_paths.py``: :data:`LAMBERT_JOB` itself, the first three,
+    the textured one and the two under the map) and the whole-path kernel (the one
+    without a light, the moving one) are compiled apart for each kind
+    (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map and 2 × 2 texture
+    are written into ``folder``."""
     sky = _write_image(folder / "sky.exr", np.full((4, 8, 3), 0.5))
     checker = _write_image(folder / "checker.exr", np.indices((2, 2, 3)).sum(axis=0) % 2)
     under_sky = {**LAMBERT_JOB, "scene": {"background": [0.1, 0.1, 0.1]}}

@@ -1,7 +1,7 @@
 """core/render/lane_paths.py: sixteen Lambert paths at a time in SIMD lanes, for static
-scenes without a map (flat or smooth-shaded, with or without image textures: base colour,
-roughness, normal and emission; lit by emissive triangles, point, spot and sun lights and
-a constant sky).
+scenes (flat or smooth-shaded, with or without image textures: base colour, roughness,
+normal and emission; lit by emissive triangles, point, spot and sun lights, a constant
+sky or a colour environment map).
 
 Its estimator is whole_paths.py's (and the wavefront integrator's), with the same random
 numbers, so the three must give the same radiance path by path (to float32 rounding: a
@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_environment import write_spectral_map
 from test_whole_paths import (
+    _checker,
     _delta_lights,
     _sky,
     _textures,
@@ -79,7 +81,27 @@ def _smooth_textured(data, folder):
     ball["material"] = "red"
 
 
+def _map_scene(scene: str, spectral: str, folder, **render) -> dict:
+    """The map-lit scene of test_whole_paths (ground, smooth ball, box under a 32 × 16
+    map with a 1-texel sun); ``+transparent`` on a transparent film, ``+lights`` with
+    point, spot and sun lights beside the map in the light CDF, ``+checker`` with
+    base-colour and normal textures."""
+    data = environment_scene(folder, spectral=spectral, spp=8, **render)
+    change = scene.partition("+")[2]
+    if change == "transparent":
+        data["render"]["transparent"] = True
+    elif change == "lights":
+        _delta_lights(data)
+    elif change == "checker":
+        _checker(data, folder)
+    return data
+
+
 def lane_scene(scene: str, spectral: str, beta: float, folder=None, **render) -> dict:
+    if scene.startswith("environment"):
+        data = _map_scene(scene, spectral, folder, **render)
+        data["motion"]["beta"] = [0.0, beta, 0.0]
+        return data
     data = cornell(spectral=spectral, spp=8, **render)
     data["motion"]["beta"] = [0.0, beta, 0.0]
     if scene in ("textures", "smooth_textured"):
@@ -104,12 +126,18 @@ def lane_scene(scene: str, spectral: str, beta: float, folder=None, **render) ->
     ("everything", "cie1931", 0.5, {}), ("everything", "rgb", 0.0, {"max_depth": 3}),
     ("textures", "cie1931", 0.0, {}), ("textures", "cie1931", 0.6, {}),
     ("textures", "rgb", 0.0, {}), ("textures", "cie1931", 0.0, {"max_depth": 2}),
-    ("smooth_textured", "cie1931", 0.3, {})])
+    ("smooth_textured", "cie1931", 0.3, {}),
+    ("environment", "cie1931", 0.0, {}), ("environment", "cie1931", 0.6, {}),
+    ("environment", "rgb", 0.0, {}), ("environment", "seed-gaussian", 0.3, {}),
+    ("environment", "cie1931", 0.0, {"max_depth": 2}),
+    ("environment+transparent", "cie1931", 0.0, {}), ("environment+lights", "cie1931", 0.4, {}),
+    ("environment+lights", "rgb", 0.0, {}), ("environment+checker", "cie1931", 0.3, {})])
 def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
         tmp_path, scene, spectral, beta, render):
     fr, ev = renderer(lane_scene(scene, spectral, beta, tmp_path, **render), tmp_path)
     assert fr.whole_paths and fr.lane_paths
-    assert lane_paths.kind(fr.kernel)[2] == ("textur" in scene)
+    assert lane_paths.kind(fr.kernel)[2] == ("textur" in scene or "checker" in scene)
+    assert lane_paths.kind(fr.kernel)[3] == scene.startswith("environment")
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth = fr.settings.max_depth
     seen = not fr.settings.transparent
@@ -137,7 +165,8 @@ def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
     assert abs(n_rays - rays2[0]) <= 0.005 * n_rays
     assert abs(n_shadow - rays2[1]) <= 0.005 * n_shadow + 1
     assert n_rays / 16 <= packets < n_rays / 16 + 64
-    if "sky" in scene or scene == "everything":  # camera rays that escape
+    if "sky" in scene or scene == "everything" or scene.startswith("environment"):
+        # camera rays that escape
         assert np.any(t1 >= 1e30)
         assert np.all(L1[t1 >= 1e30] == 0.0) == (not seen)
 
@@ -208,10 +237,13 @@ def _no_light(data):
     data["objects"] = [o for o in data["objects"] if o["name"] != "ceiling_light"]
 
 
-@pytest.mark.parametrize("change", [_no_light, "environment", "moving"])
+@pytest.mark.parametrize("change", [_no_light, "spectral map", "moving"])
 def test_scenes_that_need_more_take_scalar_whole_paths(tmp_path, change):
-    if change == "environment":
+    if change == "spectral map":  # its bands are interpolated at each λ: whole paths
         data = environment_scene(tmp_path)
+        write_spectral_map(tmp_path / "bands.exr", [400.0, 550.0, 700.0],
+                           np.full((4, 8, 3), 0.5))
+        data["scene"]["environment"] = {"file": "bands.exr"}
     elif change == "moving":
         data = scene_data(tmp_path, "cornell+moving_blocks", "cie1931", 0.0)
     else:
@@ -228,7 +260,7 @@ def test_denoising_features_leave_the_lanes(tmp_path):
     assert not lane_paths.applies(fr.kernel, fr.prep.tracer, True)
 
 
-@pytest.mark.parametrize("scene", ["cornell", "textures"])
+@pytest.mark.parametrize("scene", ["cornell", "textures", "environment"])
 def test_the_renderer_takes_the_lanes_and_its_image_is_that_of_whole_paths(tmp_path, scene):
     # (with textures: the renderer gives the lanes its camera rays' spread, as to whole
     # paths, so the levels of detail agree)

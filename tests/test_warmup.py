@@ -48,9 +48,10 @@ def whole_path_kernel(job):
 
 def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
     """The SIMD lanes compiled apart for flat or smooth shading, for emissive triangles
-    or other lights too, and for textures (``lane_paths.kernel``), and the whole-path
-    kernel compiled apart for a map, a map with textures, neither, and moving bodies
-    (``whole_paths.kernel``): the warm-up renders each kind, with the argument types the
+    or other lights too, for textures and for a colour map (``lane_paths.kernel``), and
+    the whole-path kernel compiled apart for a scene without a light and for moving
+    bodies (``whole_paths.kernel``; a spectral map's, or a map's with moving bodies, is
+    compiled at its first render): the warm-up renders each kind, with the argument types the
     Cornell box (the lanes), a seed figure (a sky and smooth shading: the lanes' general
     kind), the stars (no light: the plain whole-path kernel), the default fly-by
     (textured, smooth, under a sky: the lanes) and the train and Terrell presets (moving
@@ -58,16 +59,16 @@ def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
     warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
             for d in warmup.warmup_jobs(tmp_path)} - {None}
     assert {kind[:-1] for kind in warm} == {
-        ("lanes", False, False, False), ("lanes", False, True, False),
-        ("lanes", True, False, False), ("lanes", True, True, False),
-        ("lanes", True, True, True), (False, False, False), (True, False, False),
-        (True, True, False), (False, False, True)}
+        ("lanes", False, False, False, False), ("lanes", False, True, False, False),
+        ("lanes", True, False, False, False), ("lanes", True, True, False, False),
+        ("lanes", True, True, True, False), ("lanes", False, True, False, True),
+        ("lanes", True, True, True, True), (False, False, False), (False, False, True)}
     for preset in ("cornell.toml", "seed_figures/fig1-1.toml", "stars/ahead.toml",
                    "flyby.toml", "moving/train.toml", "moving/terrell.toml"):
         assert whole_path_kernel(load_job(PRESETS / preset)) in warm, preset
-    assert whole_path_kernel(load_job(PRESETS / "cornell.toml"))[:4] == (
-        "lanes", False, False, False)
-    assert whole_path_kernel(load_job(PRESETS / "seed_figures/fig1-1.toml"))[:4] == (
-        "lanes", True, True, False)
-    assert whole_path_kernel(load_job(PRESETS / "flyby.toml"))[:4] == (
-        "lanes", True, True, True)
+    assert whole_path_kernel(load_job(PRESETS / "cornell.toml"))[:5] == (
+        "lanes", False, False, False, False)
+    assert whole_path_kernel(load_job(PRESETS / "seed_figures/fig1-1.toml"))[:5] == (
+        "lanes", True, True, False, False)
+    assert whole_path_kernel(load_job(PRESETS / "flyby.toml"))[:5] == (
+        "lanes", True, True, True, False)

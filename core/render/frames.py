@@ -269,8 +269,8 @@ class FrameRenderer:
         # a scene of Lambert surfaces (no alpha masks, no area-light quads), moving or not:
         # whole paths in one kernel call (whole_paths.py), else the wavefront integrator
         self.whole_paths = whole_paths.applies(self.kernel, prep.tracer, self.features)
-        # ... and of those, a static one with a light to sample, without a map or textures:
-        # sixteen paths at a time in SIMD lanes
+        # ... and of those, a static one with a light to sample (a spectral map's bands
+        # excepted): sixteen paths at a time in SIMD lanes
         # (lane_paths.py; either flag False turns to the next integrator)
         self.lane_paths = self.whole_paths and lane_paths.applies(self.kernel, prep.tracer,
                                                                    self.features)

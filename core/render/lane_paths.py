@@ -12,11 +12,15 @@ selects and masks), their shadow rays one
 queue before the next packet. This is what Mitsuba 3's LLVM variant does with its
 JIT-compiled kernels, written out by hand for the scenes where it pays
 (:func:`applies`): static, Lambert, flat or smooth-shaded, lit by emissive triangles,
-point, spot and sun lights or a constant sky, with or without image textures, without an
-environment map (its lookups are libm calls and table searches that stay scalar: an
-environment-lit scene traced in lanes cost 1.00× its whole paths, so it keeps them).
-Image textures (base colour, roughness, normal, emission) are a lane loop of their own
-(:func:`texture_lanes`: scalar calls per lane), so the other loops stay vector code.
+point, spot and sun lights, a constant sky or a colour environment map, with or without
+image textures. Image textures (base colour, roughness, normal, emission) are a lane loop
+of their own (:func:`texture_lanes`: scalar calls per lane), so the other loops stay
+vector code. The environment map is vector code throughout: the escaping rays' (u, v)
+by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the light samples' texels by bisections
+of the sampler's CDFs (:func:`pick_texels`) and their directions by
+:func:`.sampling.sincos_2pi`, the texels' spectra from their coefficient rows gathered
+into the stack first (:func:`texel_rows`, :func:`texel_values`: a loop that gathers the
+rows and evaluates the sigmoids at once was left scalar by LLVM and cost 3× as much).
 
 What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
 (:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
@@ -50,6 +54,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ..physics.rgb_table import lambda_of_column
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
 from . import whole_paths
@@ -66,6 +71,15 @@ from .embree import (
     occluded16,
     set_packet_ray,
 )
+from .environment import (
+    bilinear_of,
+    direction_of,
+    place,
+    row_value,
+    sample_pdf,
+    texel_pdf_of,
+    uv_of,
+)
 from .integrator import (
     FAST_MATH,
     RR_DEPTH,
@@ -73,6 +87,7 @@ from .integrator import (
     column,
     face_forward,
     lerp,
+    lerp_at,
     offset_point,
     shading_normal,
     surface_point,
@@ -111,11 +126,12 @@ assert W == 16 and PACKET_WORDS * W == 384
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     """Whether :func:`lane_paths` can trace the scene ``sc``: one where
     :func:`.whole_paths.applies` (Lambert, no alpha mask, no area-light quad, no
-    denoising features) whose BVH is static, with no environment map (image textures
-    may be there), and with a light to sample (emissive triangles, point, spot or sun
-    lights, the constant sky)."""
+    denoising features) whose BVH is static, under a colour environment map or none (a
+    spectral map's bands stay with whole paths; image textures may be there), and with a
+    light to sample (emissive triangles, point, spot or sun lights, the constant sky, the
+    map)."""
     return (isinstance(accel, Accel) and whole_paths.applies(sc, accel, features)
-            and not sc.env_on and len(sc.l_kind) > 0)
+            and (not sc.env_on or len(sc.env_nm) == 0) and len(sc.l_kind) > 0)
 
 
 _LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
@@ -252,6 +268,144 @@ def texture_lanes(geo, tex, mats, nlanes, lamu, hit, hitf, lanes, bounce, cone,
 
 
 @njit(**_LANES)
+def env_misses(env, sky_pmf, sky_seen, hit, lanes, texels):  # pragma: no cover - compiled
+    """Where the lanes' rays that escaped see the environment map
+    (:func:`.whole_paths.env_radiance` in SIMD lanes), for :func:`env_texels` and
+    :func:`add_env`: the camera ray (unless the film is transparent) the map
+    interpolated bilinearly, weight 1; a later ray the texel it falls in (the bilinear
+    lookup of one texel, weights 0), MIS-weighted against next-event estimation,
+    w = p_bsdf² / (p_bsdf² + p_light²), p_light = p_sel · pdf(ω) (``sky_pmf`` the map's
+    p_sel): the texels' (r0, c0, r1, c1) into ``at``, (fy, fx, w) into ``ew`` (w = 0
+    where nothing is seen). Polynomial ``acos``/``atan2``, no memory but the pmf's
+    gather: vector code. Returns how many lanes see the map bilinearly."""
+    _, _, _, env_pmf, env_rot = env
+    path, _, depth, ray, _, _, _, _, prev_pdf = lanes
+    at, ew = texels
+    h, w = env_pmf.shape[0], env_pmf.shape[1]
+    direct_seen = 0
+    for lane in range(W):
+        dep = depth[lane]
+        seen = path[lane] >= 0 and hit[GEOM * W + lane] == _INVALID and (dep > 0 or sky_seen)
+        z = ray[5, lane]
+        u, v = uv_of(ray[3, lane], ray[4, lane], z, env_rot)
+        r, c, p_e = texel_pdf_of(env_pmf, u, v, z)
+        r0, r1, c0, c1, fy, fx = bilinear_of(h, w, u, v)
+        direct = dep == 0
+        wt = power_heuristic(prev_pdf[lane], sky_pmf * p_e) if sky_pmf > 0.0 else 1.0
+        wt = 1.0 if direct else wt
+        at[0, lane], at[1, lane] = (r0, c0) if direct else (r, c)
+        at[2, lane], at[3, lane] = (r1, c1) if direct else (r, c)
+        ew[0, lane], ew[1, lane] = (fy, fx) if direct else (0.0, 0.0)
+        ew[2, lane] = wt if seen else 0.0
+        direct_seen += 1 if seen and direct else 0
+    return direct_seen
+
+
+@njit(**_LANES)
+def texel_rows(env_tex, at, r_row, c_row, co):  # pragma: no cover - compiled
+    """Each lane's texel (row ``at[r_row]``, column ``at[c_row]``) of a colour map:
+    its (c0, c1, c2, k) (rgb mode (r, g, b, 1)) into the rows of ``co`` (a gather)."""
+    for lane in range(W):
+        r, c = at[r_row, lane], at[c_row, lane]
+        for k in range(4):
+            co[k, lane] = np.float64(env_tex[r, c, k])
+
+
+@njit(**_LANES)
+def texel_values(co, rgb, spec, out, o):  # pragma: no cover - compiled
+    """The lanes' radiance of the texels ``co`` (:func:`texel_rows`) at their λ
+    (``spec``: λ and E(λ) rows) into rows o … o + 3 of ``out``
+    (:func:`.environment.row_value`; stack memory only: vector code)."""
+    elam, ebase = spec
+    for j in range(4):
+        for lane in range(W):
+            out[o + j, lane] = row_value((co[0, lane], co[1, lane], co[2, lane], co[3, lane]),
+                                         rgb, j, elam[j, lane], ebase[j, lane])
+
+
+@njit(**_LANES)
+def env_texels(env_tex, rgb, spec, texels, co, vals, bilinear):  # pragma: no cover - compiled
+    """The radiance of the lanes' four texels of :func:`env_misses` into ``vals`` (rows
+    4t … 4t + 3 for texel t = (r0, c0), (r0, c1), (r1, c0), (r1, c1)); without a lane
+    that sees the map bilinearly (``bilinear`` False) the four are one texel, read once."""
+    at = texels[0]
+    texel_rows(env_tex, at, 0, 1, co)
+    texel_values(co, rgb, spec, vals, 0)
+    if bilinear:
+        texel_rows(env_tex, at, 0, 3, co)
+        texel_values(co, rgb, spec, vals, 4)
+        texel_rows(env_tex, at, 2, 1, co)
+        texel_values(co, rgb, spec, vals, 8)
+        texel_rows(env_tex, at, 2, 3, co)
+        texel_values(co, rgb, spec, vals, 12)
+    else:
+        for k in range(4, 16):
+            for lane in range(W):
+                vals[k, lane] = vals[k % 4, lane]
+
+
+@njit(**_LANES)
+def add_env(lanes, texels, vals):  # pragma: no cover - compiled
+    """The map seen by the lanes' escaped rays into ``acc``: thr · w ·
+    (1−fy)((1−fx) L00 + fx L01) + fy((1−fx) L10 + fx L11) (:func:`env_misses`' weights,
+    :func:`env_texels`' values; as :func:`.environment.env_bilinear_at` blends)."""
+    thr, acc = lanes[4], lanes[7]
+    ew = texels[1]
+    for lane in range(W):
+        fy, fx, wt = ew[0, lane], ew[1, lane], ew[2, lane]
+        for j in range(4):
+            a = _mix(vals[j, lane], vals[4 + j, lane], fx)
+            b = _mix(vals[8 + j, lane], vals[12 + j, lane], fx)
+            e = thr[j, lane] * wt * _mix(a, b, fy)
+            acc[j, lane] += e if wt > 0.0 else 0.0
+
+
+@njit(**_LANES)
+def _mix(a, b, f):
+    """(1 − f) a + f b (:func:`.environment.env_bilinear_at`'s blend)."""
+    return (1.0 - f) * a + f * b
+
+
+@njit(**_LANES)
+def pick_texels(env, l_cdf, ua, pos, etex, u1):  # pragma: no cover - compiled
+    """Each lane's texel of the map for next-event estimation, by the map sampler's two
+    CDFs (:func:`.environment.env_sample`'s searches as bisections of the same length in
+    every lane, like :func:`pick_lights`): the row from the marginal CDF at u1 (the
+    light's number rescaled inside its step of the light CDF), the column from that
+    row's conditional CDF at u2; into ``etex`` (row, column); ``u1`` the lanes' u1.
+    Every lane searches, its light the map or not (:func:`sample_lanes` uses the texel
+    where it is)."""
+    _, marg, cond, _, _ = env
+    n_m, n_c = marg.shape[0], cond.shape[1]
+    for lane in range(W):
+        _, p_sel, lo = lightmod.selected(l_cdf, pos[lane])
+        u1[lane] = rescale_uniform(ua[0, lane], lo, p_sel)
+        etex[0, lane], etex[1, lane] = 0, 0
+    s = 1
+    while s < n_m:
+        s *= 2
+    while s > 0:
+        for lane in range(W):
+            p = etex[0, lane] + s
+            etex[0, lane] = p if p <= n_m and marg[min(p, n_m) - 1] <= u1[lane] \
+                else etex[0, lane]
+        s //= 2
+    for lane in range(W):
+        etex[0, lane] = min(max(etex[0, lane] - 1, 0), n_m - 2)
+    s = 1
+    while s < n_c:
+        s *= 2
+    while s > 0:
+        for lane in range(W):
+            p = etex[1, lane] + s
+            etex[1, lane] = p if p <= n_c and cond[etex[0, lane], min(p, n_c) - 1] <= \
+                ua[1, lane] else etex[1, lane]
+        s //= 2
+    for lane in range(W):
+        etex[1, lane] = min(max(etex[1, lane] - 1, 0), n_c - 2)
+
+
+@njit(**_LANES)
 def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
     """Each lane's light by the CDF: ``pos`` = #{k: cdf[k] ≤ u} (u = ``ua[0]``), a binary
     search of the same length in every lane (``lights.select``'s searchsorted)."""
@@ -268,18 +422,23 @@ def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
 
 
 @njit(**_LANES)
-def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce,
-                 general):  # pragma: no cover - compiled
+def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general, env_on,
+                 env, etex, evals):  # pragma: no cover - compiled
     """Each lane's next-event estimation towards its light (the shadow ray into the
     ``RTCRay16`` ``shadow``, valid where the sample counts; its contribution thr ρ/π
     cos θ_i w L_e / p_light into ``nee``), then its continuation, cosine-weighted about
     g (the next ray, throughput × ρ, the roulette from ``RR_DEPTH`` on the largest lane:
-    ``alive`` whether the path goes on)."""
+    ``alive`` whether the path goes on). With a map (``env_on``), a lane whose light is
+    the map takes :func:`.environment.env_sample`'s direction in the texel ``etex``
+    (:func:`pick_texels`), its pdf, and the texel's radiance at its λ (``evals``' first
+    four rows, :func:`texel_values`)."""
     v0, e1, e2, ng, area, tri_mat = geo[:6]
     (_, emit, _, one_sided, _, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
      l_cdf) = mats[:-2]
     _, key, depth, ray, thr, li, lf, _, prev_pdf = lanes
     pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive = bounce
+    env_tex, env_marg, env_cond, env_pmf, env_rot = env
+    h_e, w_e = env_tex.shape[0], env_tex.shape[1]
     lane4 = 1.0 if nlanes == 4 else 0.0
     for lane in range(eps.shape[0]):
         dep = depth[lane]
@@ -301,6 +460,20 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce,
                 (e2[lt, 0], e2[lt, 1], e2[lt, 2]), (ng[lt, 0], ng[lt, 1], ng[lt, 2]),
                 area[lt], one_sided[tri_mat[lt]], p_sel, u1, ua[1, lane], px, py, pz, ep)
             scale, delta, finite = np.float64(l_scale[k]), False, True
+        is_env = False
+        r_e, c_e = etex[0, lane], etex[1, lane]
+        if env_on:  # the map's sample (environment.env_light_sample) where it is the light
+            is_env = l_kind[k] == lightmod.ENV
+            fv = place(env_marg[r_e], env_marg[r_e + 1], u1)
+            fu = place(env_cond[r_e, c_e], env_cond[r_e, c_e + 1], ua[1, lane])
+            (ex, ey, ez), st = direction_of((c_e + fu) / w_e, (r_e + fv) / h_e, env_rot)
+            p_e = p_sel * sample_pdf(env_pmf, r_e, c_e, st)
+            wx, wy, wz = (ex, ey, ez) if is_env else (wx, wy, wz)
+            p_l = p_e if is_env else p_l
+            scale = 1.0 if is_env else scale
+            delta = False if is_env else delta
+            finite = False if is_env else finite
+            ok = p_e > 0.0 if is_env else ok
         cos_i = wx * nx + wy * ny + wz * nz
         go = (cont[lane] and ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0
               and wx * gx + wy * gy + wz * gz > 0.0)
@@ -321,7 +494,10 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce,
         q = 0.0
         for j in range(4):
             r = rho[j, lane]
-            nee[j, lane] = thr[j, lane] * r * c * lerp(emit, lrow, li[j, lane], lf[j, lane])
+            le = lerp(emit, lrow, li[j, lane], lf[j, lane])
+            if env_on:
+                le = evals[j, lane] if is_env else le
+            nee[j, lane] = thr[j, lane] * r * c * le
             thr[j, lane] *= r
             q = max(q, thr[j, lane] if j < 3 else thr[j, lane] * lane4)
         # the continuation: cosine-weighted about n, refused below g
@@ -353,10 +529,11 @@ def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
             acc[j, lane] += nee[j, lane] if seen else 0.0
 
 
-def _compile(smooth: bool, general: bool, textured: bool) -> Any:
+def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
     """The lane kernel for one kind of scene (:func:`kernel`): ``smooth`` vertex normals,
     ``general`` lights other than emissive triangles (point, spot, sun, the constant
-    sky), ``textured`` image textures (:func:`texture_lanes`). The three are constants of
+    sky, the map), ``textured`` image textures (:func:`texture_lanes`), ``env_on`` an
+    environment map (:func:`env_misses`, :func:`pick_texels`). The four are constants of
     the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
     carry no normal interpolation, no light kinds it does not have and no texture lookups
     (numba's on-disk cache keys each variant by its closure's values)."""
@@ -364,8 +541,9 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
-                   l_cdf, tri_pmf, sky_pmf, sky_row, eps_base, tex, keys, o, d, lamu, spread,
-                   nlanes, max_depth, sky_seen, L, first_t, log):  # pragma: no cover - compiled
+                   l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_pmf,
+                   env_rot, env_row, eps_base, tex, keys, o, d, lamu, spread, nlanes, max_depth,
+                   sky_seen, L, first_t, log):  # pragma: no cover - compiled
         """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
         the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
         coordinates, the camera rays' spread angles: read with textures only), the outputs
@@ -405,6 +583,18 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
         # with textures: the ray cones (width, spread), one lane's values for the
         # texture calls (texture_lanes)
         cone = stack_array(2, 16, np.float64)
+        # with a map: the lanes' λ (nm) and the map's E(λ) there, fixed along a path (a
+        # static scene), the texel each lane's light sample would take, its u1
+        elam = stack_array(4, 16, np.float64)
+        ebase = stack_array(4, 16, np.float64)
+        etex = stack_array(2, 16, np.int64)
+        eu = stack_array(1, 16, np.float64)[0]
+        # the texels the escaped rays see (rows, columns; weights), one texel's
+        # coefficient rows, the lanes' radiance of up to four texels
+        texels = (stack_array(4, 16, np.int64), stack_array(3, 16, np.float64))
+        co = stack_array(4, 16, np.float64)
+        evals = stack_array(16, 16, np.float64)
+        rgb = nlanes == 3
         scratch = (stack_array(1, 3, np.float64)[0], stack_array(1, 4, np.float64)[0],
                    stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.int64)[0],
                    stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.float32),
@@ -421,15 +611,19 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
             for c in range(3):
                 pt[c, lane], gn[c, lane], nrm[c, lane] = 0.0, 0.0, 0.0
             for c in range(2):
-                ua[c, lane], cone[c, lane] = 0.0, 0.0
+                ua[c, lane], cone[c, lane], etex[c, lane] = 0.0, 0.0, 0
+            eu[lane] = 0.0
             for j in range(4):
                 thr[j, lane], li[j, lane], lf[j, lane], acc[j, lane] = 0.0, 0, 0.0, 0.0
                 rho[j, lane], nee[j, lane] = 0.0, 0.0
+                elam[j, lane], ebase[j, lane] = 0.0, 0.0
         geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn)
         mats = (refl, emit, emit_row, one_sided, tri_pmf, l_kind, l_prim, l_pos, l_dir, l_row,
                 l_scale, l_spot, l_cdf, sky_pmf, sky_row)
         lanes = (path, key, depth, ray, thr, li, lf, acc, prev_pdf)
         bounce = (pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive)
+        env = (env_tex, env_marg, env_cond, env_pmf, env_rot)
+        spec = (elam, ebase)
         log_hit, log_shadow, log_valid = log
         record = log_hit.shape[0] > 1
         nxt = 0
@@ -456,6 +650,12 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
                     prev_pdf[lane] = 0.0
                     if textured:
                         cone[0, lane], cone[1, lane] = 0.0, np.float64(spread[i])
+                    if env_on:  # whole_paths.env_lanes_at
+                        for j in range(4):
+                            lu = np.float64(lamu[i, j])
+                            elam[j, lane] = 0.0 if rgb else lambda_of_column(lu)
+                            ebase[j, lane] = lerp_at(emit, env_row, lu, top) \
+                                if j < 3 or nlanes == 4 else 0.0
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
                     busy += 1
@@ -470,11 +670,20 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
             intersect16(handle, valid, hit)
             shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce,
                        smooth, general)
+            if env_on:
+                bilinear = env_misses(env, sky_pmf, sky_seen, hit, lanes, texels) > 0
+                env_texels(env_tex, rgb, spec, texels, co, evals, bilinear)
+                add_env(lanes, texels, evals)
             if textured:
                 texture_lanes(geo, tex, (mat_alpha, emit, one_sided), nlanes, lamu, hit, hitf,
                               lanes, bounce, cone, scratch)
             pick_lights(l_cdf, ua, pos)
-            sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general)
+            if env_on:
+                pick_texels(env, l_cdf, ua, pos, etex, eu)
+                texel_rows(env_tex, etex, 0, 1, co)
+                texel_values(co, rgb, spec, evals, 0)
+            sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general,
+                         env_on, env, etex, evals)
             for lane in range(W):
                 n_sh += svalid[lane] != 0
             if record:
@@ -503,24 +712,24 @@ def _compile(smooth: bool, general: bool, textured: bool) -> Any:
     return lane_paths
 
 
-def kind(sc: KernelScene) -> tuple[bool, bool, bool]:
+def kind(sc: KernelScene) -> tuple[bool, bool, bool, bool]:
     """The scene's kind of lane kernel (:func:`_compile`): (vertex normals, lights other
-    than emissive triangles or a constant sky, image textures)."""
+    than emissive triangles or a constant sky, image textures, an environment map)."""
     return (bool(sc.has_vn), bool(np.any(np.asarray(sc.l_kind) != lightmod.TRIANGLE))
-            or int(sc.sky_row) >= 0, bool(sc.tex.enabled))
+            or int(sc.sky_row) >= 0, bool(sc.tex.enabled), bool(sc.env_on))
 
 
-#: the compiled variants, by (smooth, general, textured) (:func:`kernel`)
-_KERNELS: dict[tuple[bool, bool, bool], Any] = {}
+#: the compiled variants, by (smooth, general, textured, map) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, bool, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def kernel(smooth: bool, general: bool, textured: bool = False) -> Any:
+def kernel(smooth: bool, general: bool, textured: bool = False, env_on: bool = False) -> Any:
     """The lane kernel for scenes with or without vertex normals, with or without
-    lights other than emissive triangles, with or without image textures
-    (:func:`_compile`); made once per kind, also when several render threads ask for it
-    at once."""
-    key = (bool(smooth), bool(general), bool(textured))
+    lights other than emissive triangles, with or without image textures, with or
+    without a colour environment map (:func:`_compile`); made once per kind, also when several
+    render threads ask for it at once."""
+    key = (bool(smooth), bool(general), bool(textured), bool(env_on))
     with _KERNELS_LOCK:
         if key not in _KERNELS:
             _KERNELS[key] = _compile(*key)
@@ -558,7 +767,9 @@ def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
     return run(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
                sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind,
                sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
-               sc.tri_pmf, sc.sky_pmf, sc.sky_row, float(sc.eps), sc.tex, keys, o, d, lamu,
+               sc.tri_pmf, sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond,
+               sc.env_pmf, float(sc.env_rot), int(sc.env_row), float(sc.eps), sc.tex, keys, o, d,
+               lamu,
                whole_paths.cone_spread(sc, spread, len(keys)), nlanes, max_depth, sky_seen, L,
                first_t, NO_LOG if log is None else log)
 
