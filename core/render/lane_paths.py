@@ -384,11 +384,11 @@ def pick_texels(env, l_cdf, ua, pos, etex, u1):  # pragma: no cover - compiled
     s = 1
     while s < n_m:
         s *= 2
-    while s > 0:
+    while s > 0:  # (the load not under the bound's test: a select, not a branch)
         for lane in range(W):
             p = etex[0, lane] + s
-            etex[0, lane] = p if p <= n_m and marg[min(p, n_m) - 1] <= u1[lane] \
-                else etex[0, lane]
+            below = marg[min(p, n_m) - 1] <= u1[lane]
+            etex[0, lane] = p if (p <= n_m) & below else etex[0, lane]
         s //= 2
     for lane in range(W):
         etex[0, lane] = min(max(etex[0, lane] - 1, 0), n_m - 2)
@@ -398,8 +398,8 @@ def pick_texels(env, l_cdf, ua, pos, etex, u1):  # pragma: no cover - compiled
     while s > 0:
         for lane in range(W):
             p = etex[1, lane] + s
-            etex[1, lane] = p if p <= n_c and cond[etex[0, lane], min(p, n_c) - 1] <= \
-                ua[1, lane] else etex[1, lane]
+            below = cond[etex[0, lane], min(p, n_c) - 1] <= ua[1, lane]
+            etex[1, lane] = p if (p <= n_c) & below else etex[1, lane]
         s //= 2
     for lane in range(W):
         etex[1, lane] = min(max(etex[1, lane] - 1, 0), n_c - 2)
