@@ -87,7 +87,6 @@ from .integrator import (
     column,
     face_forward,
     lerp,
-    lerp_at,
     offset_point,
     shading_normal,
     surface_point,
@@ -650,11 +649,11 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                     prev_pdf[lane] = 0.0
                     if textured:
                         cone[0, lane], cone[1, lane] = 0.0, np.float64(spread[i])
-                    if env_on:  # whole_paths.env_lanes_at
+                    if env_on:  # whole_paths.env_lanes_at (E(λ): lerp_at at the lane's column)
                         for j in range(4):
-                            lu = np.float64(lamu[i, j])
-                            elam[j, lane] = 0.0 if rgb else lambda_of_column(lu)
-                            ebase[j, lane] = lerp_at(emit, env_row, lu, top) \
+                            elam[j, lane] = 0.0 if rgb else lambda_of_column(
+                                np.float64(lamu[i, j]))
+                            ebase[j, lane] = lerp(emit, env_row, li[j, lane], lf[j, lane]) \
                                 if j < 3 or nlanes == 4 else 0.0
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
