@@ -1592,9 +1592,10 @@ def _section_path_floor(add, d) -> None:
         f"relray.bench.path_floor --scene S --size {r0['size']:.0f} --spp {r0['spp']:.0f}` "
         "(`bench/results/path_floor.csv`; the `profiles` section of `make bench`). The "
         "Cornell box, the heavy scene and the environment-lit scene are static and "
-        "Lambert, so the renderer traces them as whole paths (`render/whole_paths.py`: each "
+        "Lambert, so whole paths apply (`render/whole_paths.py`: each "
         "path to its end in one loop, Embree called from it, its state in registers); the "
-        "first two, which have no map, sixteen at a time in SIMD lanes "
+        "renderer traces all three sixteen at a time in SIMD lanes (the environment-lit "
+        "scene since 2026-11-27 06:00) "
         "(`render/lane_paths.py`: the same estimator, the lanes' state as structure of "
         "arrays on the kernel's stack, their shading compiled to 16-lane vector code, "
         "their rays in Embree's 16-ray packets). On the same camera rays, keys and hero "
@@ -1652,6 +1653,7 @@ def _section_path_floor(add, d) -> None:
     c = by.get("cornell", r0)
     if _num(c.get("lanes_ns")):
         h = by.get("heavy", {})
+        e = by.get("environment", {})
         add(f"\nIn SIMD lanes a Cornell path costs {c['lanes_ns']:.0f} ns against "
             f"{c['whole_ns']:.0f} one path at a time ({c['lanes_over_whole']:.2f}×): Embree's "
             f"16-ray packets {c['embree16_ns']:.0f} ns against {c['embree_ns']:.0f} for "
@@ -1672,11 +1674,25 @@ def _section_path_floor(add, d) -> None:
                if _num(h.get("lanes_other_ns")) else "more than the box's")
             + "); the lanes' refill from the queue and the radiance written back are "
             "scalar. A packed record per triangle (one cache line instead of seven tables) "
-            "cut the heavy scene's lanes by 6 % by hand (next steps). The environment-lit "
-            "scene keeps whole paths: its map's lookups "
-            "(`atan2`/`acos` of every escaping ray, the sampler's binary searches and "
-            "trigonometry, the texels) are libm calls and searches that stay scalar, and "
-            "traced in lanes it cost 1.00× its whole paths (by hand, 2026-11-26 23:35).\n")
+            "cut the heavy scene's lanes by 6 % by hand (next steps). On the "
+            "environment-lit scene the lanes cost "
+            + (f"{e['lanes_ns']:.0f} ns against {e['whole_ns']:.0f} one path at a time "
+               f"({e['lanes_over_whole']:.2f}×); Embree's packets {e['embree16_ns']:.0f} ns "
+               f"against {e['embree_ns']:.0f}, the rest {e['lanes_other_ns']:.0f} ns against "
+               f"{e['whole_other_ns']:.0f}"
+               if _num(e.get("lanes_ns")) else "less than its whole paths")
+            + ". Its map is vector code (the escaping rays' (u, v) by polynomial "
+            "`acos`/`atan2`, `render/arcs.py`; the light samples' texels by bisection of the "
+            "sampler's CDFs; the texels' spectra from their coefficient rows gathered into "
+            "the stack first). What it still costs, by hand (each part removed from the "
+            "kernel, or run twice, 2026-11-27 05:50, ns per path): the two CDF bisections "
+            "run twice add about 90 (dependent gathers from the 263 KB conditional CDF; 37 "
+            "in a loop alone with the table in L2), the texels' sigmoids about 50, "
+            "the escaping rays' (u, v), pdf and blend about 30 (the bilinear lookup of camera "
+            "rays 23 more), the four `exp` of λ at a path's start about 20. Embree's share "
+            "of this scene's lanes is small: its simple geometry takes about 42 ns a ray "
+            "(2.45 rays a path), while every escaping ray and every light sample does the "
+            "map's work.\n")
 
 
 def _num(v: Any) -> bool:
@@ -1742,6 +1758,59 @@ def shadow_embree_ns(d) -> float | None:
     t = tp[0]
     return d["embree_floor"][0]["embree_occluded_ns"] * t["occluded_rays"] / t["paths"]
 
+
+
+def _env_lanes_bullet(add, d) -> None:
+    """The 2026-11-27 morning round: colour environment maps in the SIMD lanes."""
+    eq = [r for r in d["peer_equal_error"]
+          if r["scene"] == "environment" and r["metric"] == "rel_mse"]
+    ratio = {(r["peer"], int(r["level_index"])): float(r["ratio_relray_over_peer"])
+             for r in eq}
+    peers = "; ".join(
+        f"{name} {ratio[(peer, 0)]:.2f} / {ratio[(peer, 1)]:.2f}"
+        for peer, name in (("llvm_ad_spectral", "`llvm_ad_spectral`"),
+                           ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
+        if (peer, 0) in ratio and (peer, 1) in ratio)
+    prof = {r["scene"]: r for r in d["profile_scenes"] if r["stage"] == "total"}
+    env_ns = (f"{float(prof['environment']['ns_per_path']):.0f} ns per path in the "
+              "per-scene profile (676 before)" if "environment" in prof else "")
+    add("- **Environment maps in the SIMD lanes** (`render/lane_paths.py`, 2026-11-27 "
+        "05:40; last round's next step 1, the map's part): a static scene under a colour "
+        "map (RGB-emitter texels; a spectral map's bands stay with whole paths) is now "
+        "traced sixteen paths at a time, with textures or without. Everything the map "
+        "does is vector code: `acos`/`atan2` as branch-free polynomials "
+        "(`render/arcs.py`, within 1e-15 of libm's, `tests/test_arcs.py`, which also "
+        "checks that a loop of them compiles to packed code without libm calls), the "
+        "sampler's sin/cos by `sampling.sincos_2pi` (its series now through θ¹⁶, 2e-16: "
+        "near the poles sin θ comes back as √(1 − cos²θ), where the old 2e-9 moved the "
+        "pdf by 1e-4 relative), the light samples' texels by bisection of the marginal and "
+        "conditional CDFs in every lane (`pick_texels`), the escaping rays' texels, MIS "
+        "weights and bilinear weights (`env_misses`), and the texels' spectra from their "
+        "(c0, c1, c2, k) rows gathered into the kernel's stack first (`texel_rows`, "
+        "`texel_values`; the four bilinear texels only when a camera ray of the packet "
+        "sees the map): one loop that gathered the rows and evaluated the sigmoids "
+        "together was left scalar by LLVM and cost 130–185 ns per path against 56 now. "
+        "A fourth compile flag (`lane_paths.kernel(smooth, general, textured, env_on)`); "
+        "the warm-up's two map scenes now compile lane kernels. "
+        "`tests/test_lane_paths.py` checks path by path against whole paths and the "
+        "wavefront (spectral, rgb and seed-gaussian; β 0, 0.3 and 0.6; depth 2 and 5; a "
+        "transparent film; point, spot and sun lights beside the map in the light CDF; "
+        "checker and normal textures under the map) and the renderer's image against "
+        "whole paths; five mutations were caught (the MIS weight dropped, the map never "
+        "the light, the column search in the wrong row, the bilinear lookup's other "
+        "three texels skipped, one of its texels read in place of another). "
+        "The renderer's CPU per path on the environment-lit scene "
+        "(`python -m relray.bench.ab 055e6e0 --scene environment`, 6 alternated pairs, "
+        "128², 16 spp, 1 thread, 05:48) **0.91×** (quartiles 0.89–0.93; 605 → 548 ns); "
+        "the kernel alone 0.81–0.85× its whole paths (§6); the Cornell box unchanged "
+        "(0.99, quartiles 0.93–1.03, 05:57). The polynomial arcs alone do not speed up "
+        "whole paths (466c7fa against 055e6e0: 0.99, 6 pairs)"
+        + (f"; {env_ns}" if env_ns else "")
+        + (". Equal-error CPU time on the environment-lit scene at the high / low level "
+           f"(§2, relative MSE): {peers} (1.24 / 1.44, 0.42 / 0.35 and 0.21 / 0.23 in "
+           "the last run): the `scalar_spectral` goal is met there now, the "
+           "`llvm_ad_spectral` one not yet" if peers else "")
+        + ".")
 
 
 def _textured_lanes_bullet(add, d) -> None:
@@ -1821,6 +1890,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _env_lanes_bullet(add, d)
     _textured_lanes_bullet(add, d)
     if lane_rows:
         c = lane_rows.get("cornell", next(iter(lane_rows.values())))
@@ -2085,30 +2155,29 @@ def _section_recommendations(add, d) -> None:
             f"wavelengths {_ns(d, 'camera:', 'hero:'):.0f} ns; the film "
             f"{_ns(d, 'film:'):.0f} ns.\n")
     add("Next steps, by expected gain:\n")
-    add("1. **SIMD lanes for the other kinds of scene**: moving bodies (each body's "
-        "rest-frame rays as a packet of its own, the frame changes as lane arithmetic) "
-        "and the environment map (its `atan2`/`acos` and the sampler's searches need "
-        "vector forms first: polynomial arcs as `sincos_2pi` has, a guide table for the "
-        "CDFs); then the moving and environment-lit scenes would follow the box. The "
-        "textured box takes the lanes since 2026-11-27, its lookups scalar calls per "
-        "lane (the textured box's texture work is still about half its CPU per path: "
-        "1326 against the plain box's 669 ns); the lookups as gathers (the atlas "
-        "descriptors, the mip level, four texels per lane) would be the next step "
-        "there.")
+    add("1. **SIMD lanes for moving bodies** (each body's rest-frame rays as a packet of "
+        "its own, the frame changes as lane arithmetic); then the moving scene would "
+        "follow the box. The environment map takes the lanes since 2026-11-27 05:40 (its "
+        "arcs as polynomials, its searches as bisections, above). The textured box takes "
+        "the lanes since 2026-11-27 02:20, its lookups scalar calls per lane (the "
+        "textured box's texture work is still about half its CPU per path: 1326 against "
+        "the plain box's 669 ns); the lookups as gathers (the atlas descriptors, the mip "
+        "level, four texels per lane) would be the next step there.")
     add("2. **A packed record per triangle for the lanes' hit gathers** (the heavy "
         "scene): vertex, edges, normal, area, light pmf and material in one 64-byte row "
         "instead of seven tables, one cache miss per hit instead of up to seven; by hand "
         "(2026-11-26 23:41, 200 k triangles) the lane kernel 0.84× its whole paths "
         "against 0.91×, for 64 bytes more per triangle unless the row replaces the "
         "tables (the wavefront and whole-path kernels read them too).")
-    add("3. **The environment map's lookups** (the environment-lit scene, 0.46 of "
-        "`scalar_spectral`'s equal-error time at the high level, goal 0.4): perf on the "
-        "whole-path kernel shows its time outside Embree in the map's texel loads (cache "
-        "misses: a miss after a bounce looks up a random texel of the 512 KB table and "
-        "its 128 KB pmf), `atan2`/`acos` of every escaping ray and `sin`/`cos` of every "
-        "light sample (about 15 % of its samples in libm), and the two binary searches of "
-        "the sampler; a guide table for the CDFs (as the wavelength sampler has) and a "
-        "float32 conditional CDF would shorten the last two.")
+    add("3. **The environment map's searches** (the environment-lit scene, now in the "
+        "lanes; `llvm_ad_spectral`'s goal still not met there): the lanes' two CDF "
+        "bisections are the largest part of the map's cost (run twice they add about "
+        "90 ns per path: nine and ten dependent gathers, the conditional CDF's 263 KB "
+        "missing the caches); a guide table per row (as the wavelength sampler has: one "
+        "cache line and a step or two per search) would serve the lanes and whole paths "
+        "alike, with the same texel as the bisection. Then the four `exp` of λ at a "
+        "path's start (about 20 ns per path; a polynomial `exp` would vectorise) and the "
+        "sigmoids of the texels (about 50).")
     add("4. **The bodies' rest-frame traversal** (the moving scene): each body's rays "
         "are boosted and traced in its own BVH, one `rtcIntersect1` per body and ray "
         "(an `rtcIntersect8` packet over one masked scene is slower, above); a tighter "
