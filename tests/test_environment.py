@@ -17,6 +17,7 @@ import sys
 import numpy as np
 import OpenImageIO as oiio
 import pytest
+from numba import njit
 from render_helpers import (
     aberrate,
     base_job,
@@ -506,12 +507,49 @@ def uv_of(d, rot_deg):
     return u - math.floor(u), v
 
 
+@njit(cache=True)
+def _guided_all(cdf, guide, u, out):
+    for i in range(u.shape[0]):
+        out[i] = environment.guided_bin(cdf, guide, u[i])
+
+
+def test_the_guided_search_finds_the_bin_a_binary_search_finds():
+    """guided_bin (the sampler's search from its guide table) against searchsorted's
+    answer, clamped as the sampler clamps it, on CDFs with empty steps (runs of equal
+    entries, at the start, inside and at the end), a CDF whose mass sits in one bin, and
+    uniform ones; u at every entry, just below each, at the guide's bucket edges and just
+    below them, and uniform."""
+    rng = np.random.default_rng(5)
+    w = rng.random(300) ** 6
+    w[:20] = 0.0
+    w[100:140] = 0.0
+    w[-15:] = 0.0
+    one = np.zeros(64)
+    one[17] = 1.0
+    # (six equal bins: just below 5/6, u·6 rounds up to 5, the bucket of the entry 5/6
+    # itself: the guide must start below it)
+    for weights in (w, one, np.ones(33), np.ones(6), rng.random(7)):
+        cdf = np.concatenate([[0.0], np.cumsum(weights)]) / weights.sum()
+        cdf[-1] = 1.0
+        n = len(cdf) - 1
+        guide = environment.guide_table(cdf)
+        edges = np.arange(n) / n
+        u = np.concatenate([cdf[:-1], np.nextafter(cdf[1:], 0.0), edges,
+                            np.nextafter(edges[1:], 0.0), rng.random(20_000)])
+        u = u[(u >= 0.0) & (u < 1.0)]
+        got = np.empty(len(u), np.int64)
+        _guided_all(cdf, guide, u, got)
+        want = np.clip(np.searchsorted(cdf, u, side="right") - 1, 0, n - 1)
+        assert np.array_equal(got, want)
+
+
 def sample_many(ke, u):
     out = np.zeros((len(u), 3))
     pdf = np.zeros(len(u))
     texel = np.zeros((len(u), 2), int)
     for i, (a, b) in enumerate(u):
-        w, p, r, c = environment.env_sample(ke.marg, ke.cond, ke.pmf, ke.rot, a, b)
+        w, p, r, c = environment.env_sample(ke.marg, ke.cond, ke.mguide, ke.cguide, ke.pmf,
+                                            ke.rot, a, b)
         out[i] = w
         pdf[i] = p
         texel[i] = r, c

@@ -198,6 +198,8 @@ class KernelScene(NamedTuple):
     env_tex: np.ndarray   # float32 (H, W, 4): per texel (c0, c1, c2, k) or rgb (r, g, b, 1)
     env_marg: np.ndarray  # float64 (H + 1,): CDF over rows
     env_cond: np.ndarray  # float64 (H, W + 1): CDF over each row's columns
+    env_mguide: np.ndarray  # int32 (H,): the marginal CDF's guide table
+    env_cguide: np.ndarray  # int32 (H, W): the conditional CDFs' guide tables
     env_pmf: np.ndarray   # float32 (H, W): probability of each texel
     env_rot: float        # rotation_z, radians
     env_row: int          # emission row of E(λ) (D65_ext; rgb mode: ones)
@@ -292,6 +294,7 @@ def kernel_scene(extent: float, normals: np.ndarray | None,
                                                                              np.int32),
         mat_rgb, bool(env.on), np.ascontiguousarray(env.tex, np.float32),
         np.ascontiguousarray(env.marg, np.float64), np.ascontiguousarray(env.cond, np.float64),
+        np.ascontiguousarray(env.mguide, np.int32), np.ascontiguousarray(env.cguide, np.int32),
         np.ascontiguousarray(env.pmf, np.float32), float(env.rot), int(env.row),
         np.ascontiguousarray(env.nm, np.float64),
         no_textures(len(tables.mat_alpha)) if textures is None else textures)
@@ -695,8 +698,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
      s_mat_alpha, s_mat_ior, s_mat_emit_row, s_mat_one_sided, s_l_kind, s_l_prim, s_l_pos,
      s_l_dir, s_l_row, s_l_scale, s_l_spot, s_l_cdf, s_tri_pmf, s_sky_pmf, s_sky_row,
      s_eps, s_seg, s_l_seg, s_shift,
-     s_beam, _, s_mat_rgb, s_env_on, s_env_tex, s_env_marg, s_env_cond, s_env_pmf, s_env_rot,
-     s_env_row, s_env_nm, s_tex) = sc
+     s_beam, _, s_mat_rgb, s_env_on, s_env_tex, s_env_marg, s_env_cond, s_env_mguide,
+     s_env_cguide, s_env_pmf, s_env_rot, s_env_row, s_env_nm, s_tex) = sc
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod,
      t_mat_flag, t_nscale, t_estr, t_trans, t_uvir, t_tri_uv, t_cscale, t_cdata, t_d65,
      t_rgb, t_on, _, _) = s_tex
@@ -933,7 +936,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
                 eps_l = ray_offset_at(s_eps, pl[0], pl[1], pl[2])
                 if is_env:
                     (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
-                        s_env_marg, s_env_cond, s_env_pmf, s_env_rot, p_sel,
+                        s_env_marg, s_env_cond, s_env_mguide, s_env_cguide, s_env_pmf,
+                        s_env_rot, p_sel,
                         rescale_uniform(u_a, cdf_k, p_sel), u2)
                 else:
                     wi, p_l, scale, delta, finite, target, ok = sample_light(
@@ -969,7 +973,8 @@ def shade(sc, paths, rays, hits, shadows, n, depth, max_depth, nlanes, sky_seen,
             else:
                 if is_env:
                     (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
-                        s_env_marg, s_env_cond, s_env_pmf, s_env_rot, p_sel,
+                        s_env_marg, s_env_cond, s_env_mguide, s_env_cguide, s_env_pmf,
+                        s_env_rot, p_sel,
                         rescale_uniform(u_a, cdf_k, p_sel), u2)
                 else:
                     wi, p_l, scale, delta, finite, target, ok = sample_light(

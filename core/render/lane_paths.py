@@ -15,12 +15,13 @@ JIT-compiled kernels, written out by hand for the scenes where it pays
 point, spot and sun lights, a constant sky or a colour environment map, with or without
 image textures. Image textures (base colour, roughness, normal, emission) are a lane loop
 of their own (:func:`texture_lanes`: scalar calls per lane), so the other loops stay
-vector code. The environment map is vector code throughout: the escaping rays' (u, v)
-by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the light samples' texels by bisections
-of the sampler's CDFs (:func:`pick_texels`) and their directions by
+vector code. The environment map's lookups are vector code: the escaping rays' (u, v)
+by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the light samples' directions by
 :func:`.sampling.sincos_2pi`, the texels' spectra from their coefficient rows gathered
 into the stack first (:func:`texel_rows`, :func:`texel_values`: a loop that gathers the
-rows and evaluates the sigmoids at once was left scalar by LLVM and cost 3× as much).
+rows and evaluates the sigmoids at once was left scalar by LLVM and cost 3× as much);
+the light samples' texels come from the sampler's guided searches, a short scalar loop
+(:func:`pick_texels`).
 
 What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
 (:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
@@ -74,6 +75,7 @@ from .embree import (
 from .environment import (
     bilinear_of,
     direction_of,
+    guided_bin,
     place,
     row_value,
     sample_pdf,
@@ -366,42 +368,22 @@ def _mix(a, b, f):
 
 
 @njit(**_LANES)
-def pick_texels(env, l_cdf, ua, pos, etex, u1):  # pragma: no cover - compiled
-    """Each lane's texel of the map for next-event estimation, by the map sampler's two
-    CDFs (:func:`.environment.env_sample`'s searches as bisections of the same length in
-    every lane, like :func:`pick_lights`): the row from the marginal CDF at u1 (the
+def pick_texels(env, guides, l_cdf, ua, pos, etex):  # pragma: no cover - compiled
+    """Each lane's texel of the map for next-event estimation, as
+    :func:`.environment.env_sample` picks it: the row from the marginal CDF at u1 (the
     light's number rescaled inside its step of the light CDF), the column from that
-    row's conditional CDF at u2; into ``etex`` (row, column); ``u1`` the lanes' u1.
-    Every lane searches, its light the map or not (:func:`sample_lanes` uses the texel
-    where it is)."""
+    row's conditional CDF at u2, each searched from its guide table
+    (:func:`.environment.guided_bin`: a walk of about one step, scalar per lane; a
+    bisection in every lane, nine and ten dependent gathers, cost three times as much);
+    into ``etex`` (row, column). Every lane searches, its light the map or not
+    (:func:`sample_lanes` uses the texel where it is)."""
     _, marg, cond, _, _ = env
-    n_m, n_c = marg.shape[0], cond.shape[1]
+    mguide, cguide = guides
     for lane in range(W):
         _, p_sel, lo = lightmod.selected(l_cdf, pos[lane])
-        u1[lane] = rescale_uniform(ua[0, lane], lo, p_sel)
-        etex[0, lane], etex[1, lane] = 0, 0
-    s = 1
-    while s < n_m:
-        s *= 2
-    while s > 0:  # (the load not under the bound's test: a select, not a branch)
-        for lane in range(W):
-            p = etex[0, lane] + s
-            below = marg[min(p, n_m) - 1] <= u1[lane]
-            etex[0, lane] = p if (p <= n_m) & below else etex[0, lane]
-        s //= 2
-    for lane in range(W):
-        etex[0, lane] = min(max(etex[0, lane] - 1, 0), n_m - 2)
-    s = 1
-    while s < n_c:
-        s *= 2
-    while s > 0:
-        for lane in range(W):
-            p = etex[1, lane] + s
-            below = cond[etex[0, lane], min(p, n_c) - 1] <= ua[1, lane]
-            etex[1, lane] = p if (p <= n_c) & below else etex[1, lane]
-        s //= 2
-    for lane in range(W):
-        etex[1, lane] = min(max(etex[1, lane] - 1, 0), n_c - 2)
+        r = guided_bin(marg, mguide, rescale_uniform(ua[0, lane], lo, p_sel))
+        etex[0, lane] = r
+        etex[1, lane] = guided_bin(cond[r], cguide[r], ua[1, lane])
 
 
 @njit(**_LANES)
@@ -540,9 +522,10 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
-                   l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_pmf,
-                   env_rot, env_row, eps_base, tex, keys, o, d, lamu, spread, nlanes, max_depth,
-                   sky_seen, L, first_t, log):  # pragma: no cover - compiled
+                   l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_mguide,
+                   env_cguide, env_pmf, env_rot, env_row, eps_base, tex, keys, o, d, lamu,
+                   spread, nlanes, max_depth, sky_seen, L, first_t,
+                   log):  # pragma: no cover - compiled
         """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
         the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
         coordinates, the camera rays' spread angles: read with textures only), the outputs
@@ -587,7 +570,6 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
         elam = stack_array(4, 16, np.float64)
         ebase = stack_array(4, 16, np.float64)
         etex = stack_array(2, 16, np.int64)
-        eu = stack_array(1, 16, np.float64)[0]
         # the texels the escaped rays see (rows, columns; weights), one texel's
         # coefficient rows, the lanes' radiance of up to four texels
         texels = (stack_array(4, 16, np.int64), stack_array(3, 16, np.float64))
@@ -611,7 +593,6 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                 pt[c, lane], gn[c, lane], nrm[c, lane] = 0.0, 0.0, 0.0
             for c in range(2):
                 ua[c, lane], cone[c, lane], etex[c, lane] = 0.0, 0.0, 0
-            eu[lane] = 0.0
             for j in range(4):
                 thr[j, lane], li[j, lane], lf[j, lane], acc[j, lane] = 0.0, 0, 0.0, 0.0
                 rho[j, lane], nee[j, lane] = 0.0, 0.0
@@ -678,7 +659,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                               lanes, bounce, cone, scratch)
             pick_lights(l_cdf, ua, pos)
             if env_on:
-                pick_texels(env, l_cdf, ua, pos, etex, eu)
+                pick_texels(env, (env_mguide, env_cguide), l_cdf, ua, pos, etex)
                 texel_rows(env_tex, etex, 0, 1, co)
                 texel_values(co, rgb, spec, evals, 0)
             sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general,
@@ -767,8 +748,8 @@ def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
                sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind,
                sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
                sc.tri_pmf, sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond,
-               sc.env_pmf, float(sc.env_rot), int(sc.env_row), float(sc.eps), sc.tex, keys, o, d,
-               lamu,
+               sc.env_mguide, sc.env_cguide, sc.env_pmf, float(sc.env_rot), int(sc.env_row),
+               float(sc.eps), sc.tex, keys, o, d, lamu,
                whole_paths.cone_spread(sc, spread, len(keys)), nlanes, max_depth, sky_seen, L,
                first_t, NO_LOG if log is None else log)
 

@@ -168,9 +168,9 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
     def lambert_paths(tracer, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl,
                       emit, emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale,
                       l_spot, l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond,
-                      env_pmf, env_rot, env_row, env_nm, eps_base, tex, seg_f, l_seg, shift, beam,
-                      keys, o, d, lamu, spread, nlanes, max_depth, sky_seen, t0, L, first_t,
-                      first_seg, log):  # pragma: no cover - compiled
+                      env_mguide, env_cguide, env_pmf, env_rot, env_row, env_nm, eps_base, tex,
+                      seg_f, l_seg, shift, beam, keys, o, d, lamu, spread, nlanes, max_depth,
+                      sky_seen, t0, L, first_t, first_seg, log):  # pragma: no cover - compiled
         """:func:`lambert_paths`' kernel; the scene arguments those of :func:`scene_args`,
         in its order, then :func:`lambert_paths`' own (``log``: :data:`NO_LOG` unless
         ``record``)."""
@@ -347,7 +347,8 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                     # (without a map, the branch and its callees are not compiled)
                     if with_env and l_kind[k] == lightmod.ENV:
                         (wi, p_l, scale, delta, finite, target, ok), texel = env_light_sample(
-                            env_marg, env_cond, env_pmf, env_rot, p_sel, u1, u2)
+                            env_marg, env_cond, env_mguide, env_cguide, env_pmf, env_rot, p_sel,
+                            u1, u2)
                         is_env = True
                     else:
                         # with moving bodies (integrator.shade): a light of the vertex's own
@@ -654,9 +655,9 @@ def scene_args(sc: KernelScene, accel: Accel | MovingScene) -> tuple:
     return (tracer, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
             sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind, sc.l_prim,
             sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf, sc.tri_pmf,
-            sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond, sc.env_pmf,
-            sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex, sc.seg_f, sc.l_seg,
-            sc.shift, sc.beam)
+            sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond, sc.env_mguide,
+            sc.env_cguide, sc.env_pmf, sc.env_rot, sc.env_row, sc.env_nm, sc.eps, sc.tex,
+            sc.seg_f, sc.l_seg, sc.shift, sc.beam)
 
 
 def lambert_paths(sc: KernelScene, accel: Accel | MovingScene, keys: np.ndarray,
