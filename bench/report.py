@@ -1771,9 +1771,9 @@ def _env_lanes_bullet(add, d) -> None:
         for peer, name in (("llvm_ad_spectral", "`llvm_ad_spectral`"),
                            ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
         if (peer, 0) in ratio and (peer, 1) in ratio)
-    prof = {r["scene"]: r for r in d["profile_scenes"] if r["stage"] == "total"}
-    env_ns = (f"{float(prof['environment']['ns_per_path']):.0f} ns per path in the "
-              "per-scene profile (676 before)" if "environment" in prof else "")
+    env_ns = ("554 ns per path in the per-scene profile at 06:07, before the guided "
+              "searches (676 at 02:51, whole paths; the profile of this run came in a slow "
+              "phase of the machine, every scene about 1.3× its 06:07 figure)")
     add("- **Environment maps in the SIMD lanes** (`render/lane_paths.py`, 2026-11-27 "
         "05:40; last round's next step 1, the map's part): a static scene under a colour "
         "map (RGB-emitter texels; a spectral map's bands stay with whole paths) is now "
@@ -1809,13 +1809,18 @@ def _env_lanes_bullet(add, d) -> None:
         "(`python -m relray.bench.ab 055e6e0 --scene environment`, 6 alternated pairs, "
         "128², 16 spp, 1 thread, 05:48) **0.91×** (quartiles 0.89–0.93; 605 → 548 ns); "
         "the kernel alone 0.81–0.85× its whole paths (§6); the Cornell box unchanged "
-        "(0.99, quartiles 0.93–1.03, 05:57). The polynomial arcs alone do not speed up "
+        "(0.99, quartiles 0.93–1.03, 05:57); the guided searches a further 0.94× "
+        "(`bench.ab b86eab8`, quartiles 0.92–1.10, 06:15), all of it against 055e6e0 "
+        "**0.86×** (quartiles 0.79–1.01, 06:25). The polynomial arcs alone do not speed up "
         "whole paths (466c7fa against 055e6e0: 0.99, 6 pairs)"
         + (f"; {env_ns}" if env_ns else "")
         + (". Equal-error CPU time on the environment-lit scene at the high / low level "
-           f"(§2, relative MSE): {peers} (1.24 / 1.44, 0.42 / 0.35 and 0.21 / 0.23 in "
-           "the last run): the `scalar_spectral` goal is met there now, the "
-           "`llvm_ad_spectral` one not yet" if peers else "")
+           f"(§2, relative MSE): {peers}; at 06:02, the lanes without the guided "
+           "searches and the machine quicker: 1.29 / 1.14, 0.38 / 0.32, 0.24 / 0.21; before "
+           "the lanes (02:52): 1.24 / 1.44, 0.42 / 0.35, 0.21 / 0.23. The `scalar_spectral` "
+           "goal is met there now, the `llvm_ad_spectral` one not: relray's CPU per sample "
+           "is still 1.3–1.45× the LLVM variant's there, its noise per sample 0.79×"
+           if peers else "")
         + ".")
 
 
@@ -1831,9 +1836,12 @@ def _textured_lanes_bullet(add, d) -> None:
         for peer, name in (("llvm_ad_spectral", "`llvm_ad_spectral`"),
                            ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
         if (peer, 0) in ratio and (peer, 1) in ratio)
-    prof = {r["scene"]: r for r in d["profile_scenes"] if r["stage"] == "total"}
-    tex_ns = (f"{float(prof['textured']['ns_per_path']):.0f} ns per path in the per-scene "
-              "profile (1730 before)" if "textured" in prof else "")
+    llvm = (ratio.get(("llvm_ad_spectral", 0)), ratio.get(("llvm_ad_spectral", 1)))
+    llvm_met = ("the `llvm_ad_spectral` goal is met there" if None not in llvm
+                and max(llvm) <= 1.0 else "the `llvm_ad_spectral` goal met at the low level, "
+                "not at the high one in this run (0.92 / 0.65 at 02:52, 0.85 / 0.65 at 06:02, "
+                "the textured code the same)")
+    tex_ns = "1326 ns per path in the per-scene profile of 02:51 (1730 before)"
     add("- **Image textures in the SIMD lanes** (`render/lane_paths.py`, 2026-11-27 "
         "02:20; last round's next step 1, in part): a static textured scene without a "
         "map (the textured box, the default fly-by) is now traced sixteen paths at a "
@@ -1859,8 +1867,8 @@ def _textured_lanes_bullet(add, d) -> None:
         "ns)"
         + (f"; {tex_ns}" if tex_ns else "")
         + (". Equal-error CPU time on the textured box at the high / low level (§2, "
-           f"relative MSE): {peers}: the `llvm_ad_spectral` goal is now met there (1.08 / "
-           "0.75 before)" if peers else "")
+           f"relative MSE): {peers}: {llvm_met} (1.08 / 0.75 before the lanes)"
+           if peers else "")
         + ". Tried and dropped: prefetching every lane's texels before the lookups (a "
         "first pass over the lanes): **1.20×**, slower (02:34): the lookups are bound by "
         "their arithmetic more than by memory; the environment map's CDF searched by a "
