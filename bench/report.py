@@ -1760,17 +1760,23 @@ def shadow_embree_ns(d) -> float | None:
 
 
 
-def _env_lanes_bullet(add, d) -> None:
-    """The 2026-11-27 morning round: colour environment maps in the SIMD lanes."""
-    eq = [r for r in d["peer_equal_error"]
-          if r["scene"] == "environment" and r["metric"] == "rel_mse"]
+def peer_ratios(d, scene: str) -> tuple[dict, str]:
+    """A peer scene's equal-error ratios at equal relative MSE, {(peer, level): ratio},
+    and as text: "`llvm_ad_spectral` high / low; `scalar_spectral` …; Cycles …"."""
     ratio = {(r["peer"], int(r["level_index"])): float(r["ratio_relray_over_peer"])
-             for r in eq}
-    peers = "; ".join(
+             for r in d["peer_equal_error"]
+             if r["scene"] == scene and r["metric"] == "rel_mse"}
+    text = "; ".join(
         f"{name} {ratio[(peer, 0)]:.2f} / {ratio[(peer, 1)]:.2f}"
         for peer, name in (("llvm_ad_spectral", "`llvm_ad_spectral`"),
                            ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
         if (peer, 0) in ratio and (peer, 1) in ratio)
+    return ratio, text
+
+
+def _env_lanes_bullet(add, d) -> None:
+    """The 2026-11-27 morning round: colour environment maps in the SIMD lanes."""
+    _, peers = peer_ratios(d, "environment")
     env_ns = ("554 ns per path in the per-scene profile at 06:07, before the guided "
               "searches (676 at 02:51, whole paths; the profile of this run came in a slow "
               "phase of the machine, every scene about 1.3× its 06:07 figure)")
@@ -1827,15 +1833,7 @@ def _env_lanes_bullet(add, d) -> None:
 def _textured_lanes_bullet(add, d) -> None:
     """The 2026-11-27 round: image textures in the SIMD lanes, the texel spectrum as one
     vector loop, and the first image's BLAS probe."""
-    eq = [r for r in d["peer_equal_error"]
-          if r["scene"] == "textured" and r["metric"] == "rel_mse"]
-    ratio = {(r["peer"], int(r["level_index"])): float(r["ratio_relray_over_peer"])
-             for r in eq}
-    peers = "; ".join(
-        f"{name} {ratio[(peer, 0)]:.2f} / {ratio[(peer, 1)]:.2f}"
-        for peer, name in (("llvm_ad_spectral", "`llvm_ad_spectral`"),
-                           ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
-        if (peer, 0) in ratio and (peer, 1) in ratio)
+    ratio, peers = peer_ratios(d, "textured")
     llvm = (ratio.get(("llvm_ad_spectral", 0)), ratio.get(("llvm_ad_spectral", 1)))
     llvm_met = ("the `llvm_ad_spectral` goal is met there" if None not in llvm
                 and max(llvm) <= 1.0 else "the `llvm_ad_spectral` goal met at the low level, "

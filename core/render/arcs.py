@@ -43,40 +43,14 @@ _HALF_PI = 0.5 * math.pi
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _atan_reduced(s):
-    """atan s for |s| ≤ tan(π/8): s + s³ P(s²) (Horner)."""
+def _odd_series(s, c):
+    """s + s³ Σ_k c[k] s²ᵏ, by Horner's rule in s² (a loop of constant length: LLVM
+    unrolls it, so a loop over lanes that calls this stays vector code)."""
     z = s * s
-    c = _ATAN
-    p = c[9]
-    p = p * z + c[8]
-    p = p * z + c[7]
-    p = p * z + c[6]
-    p = p * z + c[5]
-    p = p * z + c[4]
-    p = p * z + c[3]
-    p = p * z + c[2]
-    p = p * z + c[1]
-    p = p * z + c[0]
+    p = 0.0
+    for k in range(len(c) - 1, -1, -1):
+        p = p * z + c[k]
     return s + s * z * p
-
-
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def _asin_reduced(s):
-    """asin s for |s| ≤ ½: s + s³ Q(s²) (Horner)."""
-    z = s * s
-    c = _ASIN
-    q = c[10]
-    q = q * z + c[9]
-    q = q * z + c[8]
-    q = q * z + c[7]
-    q = q * z + c[6]
-    q = q * z + c[5]
-    q = q * z + c[4]
-    q = q * z + c[3]
-    q = q * z + c[2]
-    q = q * z + c[1]
-    q = q * z + c[0]
-    return s + s * z * q
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -87,7 +61,7 @@ def arctan2(y, x):
     t = lo / hi if hi > 0.0 else 0.0
     big = t > _TAN_PI_8
     s = (t - 1.0) / (t + 1.0) if big else t
-    a = _atan_reduced(s)
+    a = _odd_series(s, _ATAN)  # atan s, |s| ≤ tan(π/8)
     a = a + _QUARTER_PI if big else a
     a = _HALF_PI - a if ay > ax else a
     a = math.pi - a if math.copysign(1.0, x) < 0.0 else a
@@ -100,7 +74,7 @@ def arccos(x):
     ax = abs(x)
     big = ax > 0.5
     s = math.sqrt(0.5 * (1.0 - ax)) if big else x
-    a = _asin_reduced(s)
+    a = _odd_series(s, _ASIN)  # asin s, |s| ≤ ½
     r = _HALF_PI - a
     r = 2.0 * a if big else r
     return math.pi - r if big and x < 0.0 else r
