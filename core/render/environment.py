@@ -47,8 +47,9 @@ probability of texel t proportional to its power, Y_t ΔΩ_t (Y the Rec.709 lumi
 its rgb, ΔΩ_t = (2π/W)(cos θ_top − cos θ_bottom) its solid angle; a spectral texel adds
 :data:`SPECTRAL_FLOOR` · Ȳ · mean_b L_t,b · ΔΩ_t, Ȳ = ∫ ȳ dλ, so a texel that shines only
 outside the visible, where a moving camera may see it, is sampled too): a row from the
-marginal CDF over rows, a column from that row's conditional CDF, (u, v) uniform inside
-the texel. The density per unit (u, v) is p_t·H·W and dΩ = 2π² sin θ du dv, so
+marginal CDF over rows, a column from that row's conditional CDF (each searched from a
+guide table, :func:`guided_bin`), (u, v) uniform inside the texel. The density per unit
+(u, v) is p_t·H·W and dΩ = 2π² sin θ du dv, so
 
     pdf(ω) = p_t · H · W / (2π² sin θ).
 
@@ -439,7 +440,7 @@ def guided_bin(cdf, guide, u):
     for about one step instead of log₂ n dependent loads."""
     n = cdf.shape[0] - 1
     g = guide.shape[0]
-    k = np.int64(guide[min(int(u * g), g - 1)])
+    k = np.int64(guide[min(max(int(u * g), 0), g - 1)])
     while k + 1 < n and cdf[k + 1] <= u:
         k += 1
     return k

@@ -19,7 +19,7 @@ vector code. The environment map's lookups are vector code: the escaping rays' (
 by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the light samples' directions by
 :func:`.sampling.sincos_2pi`, the texels' spectra from their coefficient rows gathered
 into the stack first (:func:`texel_rows`, :func:`texel_values`: a loop that gathers the
-rows and evaluates the sigmoids at once was left scalar by LLVM and cost 3× as much);
+rows and evaluates the sigmoids at once was left scalar by LLVM and cost 2–3× as much);
 the light samples' texels come from the sampler's guided searches, a short scalar loop
 (:func:`pick_texels`).
 
@@ -374,7 +374,7 @@ def pick_texels(env, guides, l_cdf, ua, pos, etex):  # pragma: no cover - compil
     light's number rescaled inside its step of the light CDF), the column from that
     row's conditional CDF at u2, each searched from its guide table
     (:func:`.environment.guided_bin`: a walk of about one step, scalar per lane; a
-    bisection in every lane, nine and ten dependent gathers, cost three times as much);
+    bisection in every lane, nine and ten dependent gathers, cost about twice as much);
     into ``etex`` (row, column). Every lane searches, its light the map or not
     (:func:`sample_lanes` uses the texel where it is)."""
     _, marg, cond, _, _ = env
@@ -566,7 +566,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
         # texture calls (texture_lanes)
         cone = stack_array(2, 16, np.float64)
         # with a map: the lanes' λ (nm) and the map's E(λ) there, fixed along a path (a
-        # static scene), the texel each lane's light sample would take, its u1
+        # static scene), the texel each lane's light sample would take
         elam = stack_array(4, 16, np.float64)
         ebase = stack_array(4, 16, np.float64)
         etex = stack_array(2, 16, np.int64)
