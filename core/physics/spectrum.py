@@ -303,10 +303,7 @@ class WavelengthSampler:
 
     def __post_init__(self) -> None:
         # guide[g] = the bin holding u = g/G, so the inverse CDF starts its search there
-        g = np.arange(GUIDE_SIZE) / GUIDE_SIZE
-        k = self.pdf.shape[0]
-        guide = np.clip(np.searchsorted(self.cdf, g, side="right") - 1, 0, k - 1)
-        object.__setattr__(self, "guide", guide.astype(np.int32))
+        object.__setattr__(self, "guide", guide_table(self.cdf, GUIDE_SIZE))
         # for lanes(): the grid coordinate of each bin's lower edge and its width / edge,
         # so ln λ = ln lo + log1p((λ - lo)/lo) needs no log per wavelength
         lo = np.asarray(self.edges_nm[:-1], np.float64)
@@ -387,6 +384,35 @@ class WavelengthSampler:
         return HeroLanes(lam, pdf, lamu, w_d, d_min, d_max)
 
 
+def guide_table(cdf: np.ndarray, size: int | None = None) -> np.ndarray:
+    """The guide table of a CDF of n bins (``cdf`` (n + 1,), cdf[0] = 0, non-decreasing)
+    for :func:`guided_bin`: ``size`` entries (default n), entry g the bin where the
+    search for u ≥ g/size may start, the last k with cdf[k] ≤ (g/size)(1 − 2⁻⁴⁰) (clamped
+    to [0, n − 1]; the factor keeps it at or below the answer when u·size rounds up to g,
+    which a power-of-two size never does). Devroye's indexed search: the hero
+    wavelengths' inverse CDF and the environment map's sampler."""
+    n = len(cdf) - 1
+    size = n if size is None else size
+    edges = np.arange(size) / size * (1.0 - 2.0**-40)
+    return np.clip(np.searchsorted(cdf, edges, side="right") - 1, 0, n - 1).astype(np.int32)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def guided_bin(cdf, guide, u):
+    """The bin k of a CDF of n bins with cdf[k] ≤ u < cdf[k + 1] (the last such k where
+    steps are empty; clamped to [0, n − 1]), u ∈ [0, 1): from the guide table's entry
+    for u (:func:`guide_table`) up while cdf[k + 1] ≤ u. Equal to
+    ``min(max(searchsorted(cdf, u, "right") - 1, 0), n - 1)``
+    (``tests/test_environment.py``), in about n / size steps instead of log₂ n
+    dependent loads."""
+    n = cdf.shape[0] - 1
+    g = guide.shape[0]
+    k = np.int64(guide[min(max(int(u * g), 0), g - 1)])
+    while k + 1 < n and cdf[k + 1] <= u:
+        k += 1
+    return k
+
+
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _invert_cdf(cdf, edges, guide, v):
     """(bin b, fraction t in the bin, λ) of the inverse CDF at v ∈ [0, 1).
@@ -395,11 +421,7 @@ def _invert_cdf(cdf, edges, guide, v):
     it costs O(1) instead of a binary search.  λ is kept below the bin's upper edge by
     hi (1 - 2^-52), cheaper than nextafter (ulp(hi) < hi 2^-52 for hi in [360, 830]).
     """
-    k = cdf.shape[0] - 1
-    g = guide.shape[0]
-    b = guide[min(int(v * g), g - 1)]
-    while b < k - 1 and cdf[b + 1] <= v:
-        b += 1
+    b = guided_bin(cdf, guide, v)
     c0 = cdf[b]
     t = min(max((v - c0) / (cdf[b + 1] - c0), 0.0), 1.0)
     lo = edges[b]

@@ -73,6 +73,7 @@ from numba import njit
 
 from ..physics import spectrum
 from ..physics.rgb_table import coefficients, lambda_of_column, sigmoid_reflectance
+from ..physics.spectrum import guide_table, guided_bin
 from ..scene.sky import EnvironmentImage
 from .arcs import arccos, arctan2
 from .sampling import sincos_2pi
@@ -93,7 +94,7 @@ class KernelEnvironment(NamedTuple):
     tex: np.ndarray    # float32 (H, W, 4): (c0, c1, c2, k), rgb mode (r, g, b, 1)
     marg: np.ndarray   # float64 (H + 1,): CDF over rows
     cond: np.ndarray   # float64 (H, W + 1): CDF over the columns of each row
-    mguide: np.ndarray  # int32 (H,): the marginal CDF's guide table (:func:`guide_table`)
+    mguide: np.ndarray  # int32 (H,): the marginal CDF's guide table (spectrum.guide_table)
     cguide: np.ndarray  # int32 (H, W): each row's conditional CDF's guide table
     pmf: np.ndarray    # float32 (H, W): probability of each texel
     rot: float         # rotation_z in radians
@@ -179,17 +180,6 @@ def distribution(power: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     cond[rows <= 0.0, 1:] = np.arange(1, w + 1) / w  # never chosen: any valid CDF
     cond[:, -1] = 1.0
     return marg, cond, (power / total).astype(np.float32)
-
-
-def guide_table(cdf: np.ndarray) -> np.ndarray:
-    """The guide table of a CDF of n bins (``cdf`` (n + 1,), cdf[0] = 0, non-decreasing):
-    n entries, entry g the bin where the search for u ≥ g/n may start, the last k with
-    cdf[k] ≤ (g/n)(1 − 2⁻⁴⁰) (clamped to [0, n − 1]; the factor keeps it at or below the
-    answer when u·n rounds up to g). From there :func:`guided_bin` walks up, about one
-    step on average (Devroye's indexed search, as the hero wavelengths' sampler)."""
-    n = len(cdf) - 1
-    edges = np.arange(n) / n * (1.0 - 2.0**-40)
-    return np.clip(np.searchsorted(cdf, edges, side="right") - 1, 0, n - 1).astype(np.int32)
 
 
 def texel_table(rgb: np.ndarray, mode: str) -> np.ndarray:
@@ -349,9 +339,14 @@ def env_bilinear_at(tex, q, rgb, nm, lam, base):
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def _mix(a, b, f):
-    """(1 − f) a + f b per lane of two 4-tuples."""
-    g = 1.0 - f
-    return (g * a[0] + f * b[0], g * a[1] + f * b[1], g * a[2] + f * b[2], g * a[3] + f * b[3])
+    """:func:`mix` per lane of two 4-tuples."""
+    return (mix(a[0], b[0], f), mix(a[1], b[1], f), mix(a[2], b[2], f), mix(a[3], b[3], f))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def mix(a, b, f):
+    """(1 − f) a + f b: the bilinear lookup's blend (:func:`env_bilinear_at`)."""
+    return (1.0 - f) * a + f * b
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -372,12 +367,10 @@ def _texel_lanes(tex, r, c, rgb, nm, lam, base):
     if nm.shape[0] > 0:
         return (band_value(tex, r, c, nm, lam[0]), band_value(tex, r, c, nm, lam[1]),
                 band_value(tex, r, c, nm, lam[2]), band_value(tex, r, c, nm, lam[3]))
-    k = np.float64(tex[r, c, 3])
-    c0, c1, c2 = tex[r, c, 0], tex[r, c, 1], tex[r, c, 2]
-    return (k * base[0] * sigmoid_reflectance(c0, c1, c2, lam[0]),
-            k * base[1] * sigmoid_reflectance(c0, c1, c2, lam[1]),
-            k * base[2] * sigmoid_reflectance(c0, c1, c2, lam[2]),
-            k * base[3] * sigmoid_reflectance(c0, c1, c2, lam[3]))
+    row = (np.float64(tex[r, c, 0]), np.float64(tex[r, c, 1]), np.float64(tex[r, c, 2]),
+           np.float64(tex[r, c, 3]))
+    return (row_value(row, False, 0, lam[0], base[0]), row_value(row, False, 1, lam[1], base[1]),
+            row_value(row, False, 2, lam[2], base[2]), row_value(row, False, 3, lam[3], base[3]))
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -429,21 +422,6 @@ def env_pdf(pmf, rot, x, y, z):
     """Solid-angle density of :func:`env_sample` at the lab direction (x, y, z):
     p_t H W / (2π² sin θ) (0 at the poles)."""
     return env_texel_pdf(pmf, rot, x, y, z)[2]
-
-
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def guided_bin(cdf, guide, u):
-    """The bin k of a CDF of n bins with cdf[k] ≤ u < cdf[k + 1] (the last such k where
-    steps are empty; clamped to [0, n − 1]), u ∈ [0, 1): from the guide table's entry
-    for u (:func:`guide_table`) up while cdf[k + 1] ≤ u. Equal to
-    ``min(max(searchsorted(cdf, u, "right") - 1, 0), n - 1)`` (``tests/test_environment.py``)
-    for about one step instead of log₂ n dependent loads."""
-    n = cdf.shape[0] - 1
-    g = guide.shape[0]
-    k = np.int64(guide[min(max(int(u * g), 0), g - 1)])
-    while k + 1 < n and cdf[k + 1] <= u:
-        k += 1
-    return k
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)

@@ -55,7 +55,6 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ..physics.rgb_table import lambda_of_column
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
 from . import whole_paths
@@ -76,6 +75,7 @@ from .environment import (
     bilinear_of,
     direction_of,
     guided_bin,
+    mix,
     place,
     row_value,
     sample_pdf,
@@ -355,16 +355,10 @@ def add_env(lanes, texels, vals):  # pragma: no cover - compiled
     for lane in range(W):
         fy, fx, wt = ew[0, lane], ew[1, lane], ew[2, lane]
         for j in range(4):
-            a = _mix(vals[j, lane], vals[4 + j, lane], fx)
-            b = _mix(vals[8 + j, lane], vals[12 + j, lane], fx)
-            e = thr[j, lane] * wt * _mix(a, b, fy)
+            a = mix(vals[j, lane], vals[4 + j, lane], fx)
+            b = mix(vals[8 + j, lane], vals[12 + j, lane], fx)
+            e = thr[j, lane] * wt * mix(a, b, fy)
             acc[j, lane] += e if wt > 0.0 else 0.0
-
-
-@njit(**_LANES)
-def _mix(a, b, f):
-    """(1 − f) a + f b (:func:`.environment.env_bilinear_at`'s blend)."""
-    return (1.0 - f) * a + f * b
 
 
 @njit(**_LANES)
@@ -630,12 +624,11 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                     prev_pdf[lane] = 0.0
                     if textured:
                         cone[0, lane], cone[1, lane] = 0.0, np.float64(spread[i])
-                    if env_on:  # whole_paths.env_lanes_at (E(λ): lerp_at at the lane's column)
+                    if env_on:  # the map's λ and E(λ) for the path's lanes
+                        lam4, base4 = whole_paths.env_lanes_at(emit, env_row, lamu[i:i + 1],
+                                                               0.0, rgb, nlanes)
                         for j in range(4):
-                            elam[j, lane] = 0.0 if rgb else lambda_of_column(
-                                np.float64(lamu[i, j]))
-                            ebase[j, lane] = lerp(emit, env_row, li[j, lane], lf[j, lane]) \
-                                if j < 3 or nlanes == 4 else 0.0
+                            elam[j, lane], ebase[j, lane] = lam4[j], base4[j]
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
                     busy += 1
