@@ -48,8 +48,8 @@ its rgb, ΔΩ_t = (2π/W)(cos θ_top − cos θ_bottom) its solid angle; a spect
 :data:`SPECTRAL_FLOOR` · Ȳ · mean_b L_t,b · ΔΩ_t, Ȳ = ∫ ȳ dλ, so a texel that shines only
 outside the visible, where a moving camera may see it, is sampled too): a row from the
 marginal CDF over rows, a column from that row's conditional CDF (each searched from a
-guide table, :func:`guided_bin`), (u, v) uniform inside the texel. The density per unit
-(u, v) is p_t·H·W and dΩ = 2π² sin θ du dv, so
+guide table, :func:`..physics.spectrum.guided_bin`), (u, v) uniform inside the texel.
+The density per unit (u, v) is p_t·H·W and dΩ = 2π² sin θ du dv, so
 
     pdf(ω) = p_t · H · W / (2π² sin θ).
 
@@ -453,7 +453,7 @@ def env_sample(marg, cond, mguide, cguide, pmf, rot, u1, u2):
     """A lab direction drawn ∝ texel power (module docstring), its solid-angle pdf (0
     when it fell on a pole: then refuse the sample) and the texel (row, column) it lies
     in: the row by the marginal CDF at u1, the column by that row's conditional CDF at
-    u2 (each searched from its guide table, :func:`guided_bin`)."""
+    u2 (each searched from its guide table, :func:`..physics.spectrum.guided_bin`)."""
     h, w = pmf.shape[0], pmf.shape[1]
     r, fv = _pick(marg, mguide, u1)
     c, fu = _pick(cond[r], cguide[r], u2)

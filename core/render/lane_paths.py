@@ -367,7 +367,7 @@ def pick_texels(env, guides, l_cdf, ua, pos, etex):  # pragma: no cover - compil
     :func:`.environment.env_sample` picks it: the row from the marginal CDF at u1 (the
     light's number rescaled inside its step of the light CDF), the column from that
     row's conditional CDF at u2, each searched from its guide table
-    (:func:`.environment.guided_bin`: a walk of about one step, scalar per lane; a
+    (:func:`..physics.spectrum.guided_bin`: a walk of about one step, scalar per lane; a
     bisection in every lane, nine and ten dependent gathers, cost about twice as much);
     into ``etex`` (row, column). Every lane searches, its light the map or not
     (:func:`sample_lanes` uses the texel where it is)."""
