@@ -8,13 +8,14 @@ Issue 12 asks that the work of a path outside Embree be at most two thirds of Em
 own (Embree's share of the CPU time ≥ 60 % on the Cornell box, ≥ 70 % on the heavy
 scene). :func:`relray.core.render.whole_paths.lambert_paths` is the smallest compiled
 kernel that computes relray's estimator on these scenes (the Cornell box, the heavy
-scene and the environment-lit scene): each path traced to its end in one loop, Embree
-called from it, the state in registers, nothing but two-sided Lambert, the scene's
-lights (triangles, or the map), NEE + MIS, four hero lanes and roulette (that module's
-docstring). What it spends outside Embree is what a scalar kernel must spend on these
-paths. :mod:`relray.core.render.lane_paths` computes the same estimator sixteen paths at
-a time in SIMD lanes, with Embree's 16-ray packets; the renderer runs it on the static
-scenes without a map (the Cornell box, the heavy scene).
+scene, the environment-lit scene and the peers' moving scene, :func:`floor_bench`):
+each path traced to its end in one loop, Embree called from it, the state in registers,
+nothing but two-sided Lambert, the scene's lights (triangles, or the map), NEE + MIS,
+four hero lanes and roulette (that module's docstring). What it spends outside Embree is
+what a scalar kernel must spend on these paths. :mod:`relray.core.render.lane_paths`
+computes the same estimator sixteen paths at a time in SIMD lanes, with Embree's 16-ray
+packets; the renderer runs it on the static scenes (the Cornell box, the heavy scene,
+the environment-lit scene).
 
 Measured in one process, on the same camera rays, keys and hero lanes (relray's camera
 and spectral stages, run once, outside the timing), each the fastest of ``reps`` runs
@@ -24,7 +25,8 @@ alternated, thread CPU time per path:
   renderer's general integrator;
 - *whole paths*: ``whole_paths.lambert_paths``, what the renderer runs on these scenes;
 - *Embree*: Embree alone on the whole-path kernel's own rays (recorded in one more run,
-  then traced again by ``embree.intersect_rays`` / ``occluded_rays`` in the same order);
+  then traced again by ``embree.intersect_rays`` / ``occluded_rays`` in the same order;
+  with moving bodies the rest-frame traversal of those rays, :func:`embree_replay`);
 - *numbers*: the random numbers alone that those paths draw (:func:`draw_numbers`);
 - where the lanes apply, *lanes*: ``lane_paths.lane_trace``, and *Embree16*: Embree
   alone on the lane kernel's own packets (recorded in one more run, then traced again by
@@ -45,6 +47,7 @@ from __future__ import annotations
 import argparse
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -52,9 +55,10 @@ import numpy as np
 from numba import njit
 
 from relray.bench import common as cm
-from relray.bench import profile_scenes
+from relray.bench import profile_scenes, velocity_groups
+from relray.bench.peer_scenes import MOVING_GROUPS
 from relray.core.render import lane_paths, whole_paths
-from relray.core.render.accel import MISS_DISTANCE
+from relray.core.render.accel import MISS_DISTANCE, Accel
 from relray.core.render.embree import (
     GEOM,
     PACKET,
@@ -67,6 +71,7 @@ from relray.core.render.embree import (
     set_packet_ray,
 )
 from relray.core.render.integrator import FAST_MATH, RR_DEPTH, trace
+from relray.core.render.rest_frames import MovingScene
 from relray.core.render.sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -76,8 +81,19 @@ from relray.core.render.sampling import (
     sobol2,
 )
 
-#: the benchmark scenes that take whole paths (:func:`.profile_scenes.scene_bench`)
-FLOOR_SCENES = ("cornell", "heavy", "environment")
+#: the benchmark scenes that take whole paths (:func:`floor_bench`)
+FLOOR_SCENES = ("cornell", "heavy", "environment", "moving")
+
+
+def floor_bench(name: str, tmp: Path, heavy_triangles: int) -> cm.RelrayBench:
+    """A scene of :data:`FLOOR_SCENES`: :func:`.profile_scenes.scene_bench`'s, but
+    ``moving`` as the peers' moving scene (:mod:`.peer_scenes`: the Cornell box dealt into
+    :data:`.peer_scenes.MOVING_GROUPS` bodies at β = 10⁻⁴)."""
+    if name == "moving":
+        cornell = profile_scenes.scene_bench("cornell", tmp, heavy_triangles)
+        return cm.RelrayBench(cornell.job, scene=velocity_groups.grouped_scene(
+            cornell.scene, MOVING_GROUPS))
+    return profile_scenes.scene_bench(name, tmp, heavy_triangles)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH)
@@ -124,6 +140,37 @@ def replay_packets(scene, log_hit, log_shadow, log_valid, n):  # pragma: no cove
     return found
 
 
+def embree_replay(tracer: Accel | MovingScene, log: tuple, n_rays: int,
+                  n_sh: int) -> Callable[[], None]:
+    """A call that traces the whole-path kernel's recorded rays (``log``:
+    :func:`.whole_paths.ray_log`, the first ``n_rays`` nearest-hit and ``n_sh`` shadow
+    rays) again, in order, one ray a query: in a static scene Embree alone; with moving
+    bodies the rest-frame traversal (:meth:`.rest_frames.MovingScene.intersect` and
+    ``occluded``: per ray the static BVH where its box is met and, per body its
+    rest-frame ray can reach, the boost and that body's BVH; a ray leaving a body with
+    the rest-frame form the kernel gave it), the least any design with a BVH per body
+    must trace, since Embree's instances cannot express a boost."""
+    rec_o, rec_d, sh_o, sh_d, sh_t, _, rec_t, rec_seg, rec_rest, sh_t0 = log
+    if isinstance(tracer, MovingScene):
+        buf: dict = {}
+
+        def run_moving() -> None:
+            tracer.intersect(rec_o[:n_rays], rec_d[:n_rays], rec_t[:n_rays], buf,
+                             rec_seg[:n_rays], rec_rest[:n_rays])
+            tracer.occluded(sh_o[:n_sh], sh_d[:n_sh], sh_t[:n_sh], sh_t0[:n_sh], buf)
+        return run_moving
+    hit_t, hit_p = np.empty(n_rays, np.float32), np.empty(n_rays, np.int32)
+    hit_u, hit_v = np.empty(n_rays, np.float32), np.empty(n_rays, np.float32)
+    blocked = np.empty(n_sh, np.bool_)
+    far = np.full(1, MISS_DISTANCE, np.float32)
+
+    def run_static() -> None:
+        intersect_rays(tracer.handle, rec_o[:n_rays], rec_d[:n_rays], far, hit_t, hit_p,
+                       hit_u, hit_v)
+        occluded_rays(tracer.handle, sh_o[:n_sh], sh_d[:n_sh], sh_t[:n_sh], blocked)
+    return run_static
+
+
 def camera_stage(bench: cm.RelrayBench, size: int, spp: int, seed: int = 0):
     """relray's camera and spectral stages for every path of frame 1 (size², spp, the
     render seed ``seed``; :meth:`FrameRenderer.camera_paths`): (renderer, keys, origins,
@@ -146,8 +193,8 @@ def agreement_z(a: np.ndarray, b: np.ndarray) -> float:
 def rows(tmp: Path, size: int, spp: int, heavy_triangles: int,
          reps: int = 5) -> list[dict[str, Any]]:
     """:func:`measure` on each of :data:`FLOOR_SCENES` (``make bench``)."""
-    return [{"scene": name, **measure(profile_scenes.scene_bench(name, tmp, heavy_triangles),
-                                      size, spp, reps)}
+    return [{"scene": name, **measure(floor_bench(name, tmp, heavy_triangles), size, spp,
+                                      reps)}
             for name in FLOOR_SCENES]
 
 
@@ -165,35 +212,27 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
     n, depth = len(keys), fr.settings.max_depth
     L = np.empty((n, 4), np.float32)
     first_t = np.empty(n, np.float32)
-    log = (np.empty((n * depth, 3), np.float32), np.empty((n * depth, 3), np.float32),
-           np.empty((n * depth, 3), np.float32), np.empty((n * depth, 3), np.float32),
-           np.empty(n * depth, np.float32), np.zeros(n, np.int64))
+    first_seg = np.empty(n, np.int32)
+    log = whole_paths.ray_log(n, depth)
     spread = np.zeros(n, np.float32)  # (untextured scenes: no ray cones)
+    t0 = float(bench.event(None).t)  # the camera rays' origin lab time (moving bodies)
 
     def run_whole(record: bool) -> tuple[int, int]:
         return whole_paths.lambert_paths(sc, prep.tracer, keys, o, d, lamu, spread, 4, depth,
-                                         True, L, first_t,
+                                         True, L, first_t, first_seg, t0,
                                          log=log if record else None)
 
     buffers: dict = {}
 
     def run_wavefront() -> tuple[float, np.ndarray]:
         oo, dd = o.copy(), d.copy()
-        t0 = time.thread_time()
-        out = trace(sc, prep.tracer, depth, keys, oo, dd, lamu, 4, buffers=buffers)
-        return time.thread_time() - t0, out[0]
+        start = time.thread_time()
+        out = trace(sc, prep.tracer, depth, keys, oo, dd, lamu, 4, buffers=buffers, t0=t0)
+        return time.thread_time() - start, out[0]
 
     n_rays, n_sh = run_whole(True)
-    rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
-    hit_t, hit_p = np.empty(n_rays, np.float32), np.empty(n_rays, np.int32)
-    hit_u, hit_v = np.empty(n_rays, np.float32), np.empty(n_rays, np.float32)
-    blocked = np.empty(n_sh, np.bool_)
-    far = np.full(1, MISS_DISTANCE, np.float32)
-
-    def run_embree() -> None:
-        intersect_rays(prep.tracer.handle, rec_o[:n_rays], rec_d[:n_rays], far, hit_t, hit_p, hit_u,
-                       hit_v)
-        occluded_rays(prep.tracer.handle, sh_o[:n_sh], sh_d[:n_sh], sh_t[:n_sh], blocked)
+    run_embree = embree_replay(prep.tracer, log, n_rays, n_sh)
+    bounces = log[5]
 
     whole_l = L.copy()
     wave_l = run_wavefront()[1].copy()
@@ -269,7 +308,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--reps", type=int, default=5)
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="relray-floor-") as tmp:
-        bench = profile_scenes.scene_bench(a.scene, Path(tmp), a.heavy_triangles)
+        bench = floor_bench(a.scene, Path(tmp), a.heavy_triangles)
         r = {"scene": a.scene, **measure(bench, a.size, a.spp, a.reps)}
     for k, v in r.items():
         print(f"{k:24s} {v:.4g}" if isinstance(v, float) else f"{k:24s} {v}")

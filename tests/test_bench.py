@@ -129,7 +129,9 @@ def test_smoke_run_writes_csvs_plots_and_results(tmp_path):
     assert fl["embree_intersect_ns"] > 0 and fl["embreex_intersect_ns"] > 0
     # the whole-path kernel against the wavefront: the same paths' radiance, and Embree
     # alone on its rays costs less than the kernel around them
-    for pf in common.read_csv(out / "path_floor.csv"):
+    floor = common.read_csv(out / "path_floor.csv")
+    assert {pf["scene"] for pf in floor} == {"cornell", "heavy", "environment", "moving"}
+    for pf in floor:
         assert pf["paths_differing"] <= 0.005 and pf["rays_per_path"] >= 1.0
         assert 0.0 < pf["embree_ns"] < pf["whole_ns"]
     assert (out / "convergence.png").exists() and (out / "profile.png").exists()

@@ -314,6 +314,49 @@ def test_denoising_features_take_the_wavefront_integrator(tmp_path):
     assert not fr.whole_paths
 
 
+def test_the_ray_log_of_moving_bodies_traces_again_to_the_kernels_own_hits(tmp_path):
+    """lambert_paths' log (whole_paths.ray_log, the benchmarks' replay of a path's rays,
+    bench/path_floor.py): with moving bodies each nearest-hit ray's lab time, the segment
+    it leaves and its rest-frame form there are recorded, so MovingScene.intersect finds
+    again the hit the kernel found: the body the path's next ray leaves (its recorded
+    segment), the next origin one offset from the hit point, and the camera rays' hit
+    distances; each shadow ray's origin time is its vertex's (before the camera's)."""
+    fr, ev = renderer(scene_data(tmp_path, "cornell+moving_room", "cie1931", 0.3), tmp_path)
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 4)
+    n, depth = len(keys), fr.settings.max_depth
+    L = np.empty((n, 4), np.float32)
+    first_t, first_seg = np.empty(n, np.float32), np.empty(n, np.int32)
+    log = whole_paths.ray_log(n, depth)
+    n_rays, n_sh = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
+                                             np.zeros(n, np.float32), nlanes, depth, True, L,
+                                             first_t, first_seg, float(ev.t), log=log)
+    rec_o, rec_d, sh_o, sh_d, sh_t, bounces, rec_t, rec_seg, rec_rest, sh_t0 = log
+    # a path traces its camera ray and at most one ray per continuation (roulette may end it)
+    assert n < n_rays <= n + int(bounces.sum())
+    hits = fr.prep.tracer.intersect(rec_o[:n_rays], rec_d[:n_rays], rec_t[:n_rays], {},
+                                    rec_seg[:n_rays], rec_rest[:n_rays])
+    # a ray that leaves a body: the ray before it (the same path's) hit that body
+    k = np.flatnonzero(rec_seg[1:n_rays] >= 0)
+    assert len(k) > 100
+    np.testing.assert_array_equal(hits.seg[k], rec_seg[k + 1])
+    point = rec_o[k] + hits.t[k, None] * rec_d[k]
+    assert np.max(np.linalg.norm(rec_o[k + 1] - point, axis=1)) < 1e-3
+    # the camera rays: the first of each path, at the recorded distances
+    starts, j = [], 0
+    for i in range(n):  # the log holds each path's rays in order, the camera ray first
+        while not (np.array_equal(rec_o[j], o[i]) and np.array_equal(rec_d[j], d[i])):
+            j += 1
+        starts.append(j)
+        j += 1
+    np.testing.assert_allclose(hits.t[starts], first_t, rtol=1e-6)
+    np.testing.assert_array_equal(hits.seg[starts], first_seg)
+    assert np.all(rec_seg[starts] == -1) and np.all(rec_t[starts] == float(ev.t))
+    # every shadow ray leaves a vertex, an event before the camera's (not the camera's time)
+    assert np.all(sh_t0[:n_sh] < float(ev.t))
+    blocked = fr.prep.tracer.occluded(sh_o[:n_sh], sh_d[:n_sh], sh_t[:n_sh], sh_t0[:n_sh], {})
+    assert 0.0 < blocked.mean() < 1.0
+
+
 def test_paths_differing_counts_the_rows_beyond_the_relative_tolerance():
     a = np.ones((4, 3), np.float32)
     b = a.copy()

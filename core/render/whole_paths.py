@@ -136,10 +136,25 @@ from .textures import (
 )
 
 _INV_PI = 1.0 / math.pi
+
+
+def ray_log(n_paths: int, max_depth: int) -> tuple:
+    """Room to record every ray of ``n_paths`` paths of at most ``max_depth`` rays of each
+    kind (benchmarks, :func:`lambert_paths`' ``log``): the nearest-hit rays' origins and
+    directions, the shadow rays' origins, directions and lengths, the continuations of
+    each path; with moving bodies also the nearest-hit rays' origin lab times, the
+    segment each leaves (-1: none) and its rest-frame form there
+    (:func:`.rest_frames.nearest_ray`), and the shadow rays' origin lab times: what
+    :meth:`.rest_frames.MovingScene.intersect` and ``occluded`` need to trace them again."""
+    n = n_paths * max_depth + 1
+    return (np.zeros((n, 3), np.float32), np.zeros((n, 3), np.float32),
+            np.zeros((n, 3), np.float32), np.zeros((n, 3), np.float32),
+            np.zeros(n, np.float32), np.zeros(n_paths, np.int64), np.zeros(n, np.float64),
+            np.full(n, -1, np.int32), np.zeros((n, 7), np.float32), np.zeros(n, np.float64))
+
+
 #: a log of no rays (``lambert_paths``' ``log`` when nothing is recorded)
-NO_LOG = (np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32),
-          np.zeros((1, 3), np.float32), np.zeros((1, 3), np.float32),
-          np.zeros(1, np.float32), np.zeros(1, np.int64))
+NO_LOG = ray_log(0, 0)
 
 
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
@@ -176,7 +191,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
         ``record``)."""
         f, w, addr = rayhit_buffer()
         handle, box_lo, box_hi, segs = tracer
-        rec_o, rec_d, sh_o, sh_d, sh_t, bounces = log
+        rec_o, rec_d, sh_o, sh_d, sh_t, bounces, rec_t, rec_seg, rec_rest, sh_t0 = log
         # the texture table's arrays as locals (read from the tuple in the loop, each access
         # would count a reference)
         (_, _, _, _, _, _, _, _, t_mat_flag, _, t_estr, _, t_uvir, _, t_cscale, t_cdata, t_d65,
@@ -231,6 +246,10 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                 if record:
                     rec_o[n_rays, 0], rec_o[n_rays, 1], rec_o[n_rays, 2] = ox, oy, oz
                     rec_d[n_rays, 0], rec_d[n_rays, 1], rec_d[n_rays, 2] = dx, dy, dz
+                    if with_moving:
+                        rec_t[n_rays], rec_seg[n_rays] = rt, r_seg
+                        for c in range(7):
+                            rec_rest[n_rays, c] = rest[0, c]
                 n_rays += 1
                 sg = -1  # the moving segment hit (-1: the static scene)
                 if with_moving:
@@ -418,6 +437,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
                             sh_o[n_sh, 0], sh_o[n_sh, 1], sh_o[n_sh, 2] = fo
                             sh_d[n_sh, 0], sh_d[n_sh, 1], sh_d[n_sh, 2] = fd
                             sh_t[n_sh] = st
+                            sh_t0[n_sh] = t_sh
                         n_sh += 1
                         if with_moving:
                             blocked = blocked_ray(handle, box_lo, box_hi, segs, f, w, addr, fo[0],
@@ -675,10 +695,9 @@ def lambert_paths(sc: KernelScene, accel: Accel | MovingScene, keys: np.ndarray,
     or map from camera rays. With textures, ``spread[i]`` is the camera ray's lab spread
     angle, the start of its ray cone (:func:`.textures.lab_spread`).
 
-    ``log`` (benchmarks): every nearest-hit and every shadow ray, and the number of
-    continuations of each path, into (origins, directions, shadow origins, shadow
-    directions, shadow lengths, continuations per path), with room for ``max_depth`` rays
-    of each kind per path. Returns (nearest-hit rays, shadow rays)."""
+    ``log`` (benchmarks, :func:`ray_log`): every nearest-hit and every shadow ray, and
+    the number of continuations of each path (with moving bodies also the rays' lab
+    times and rest-frame forms). Returns (nearest-hit rays, shadow rays)."""
     moving = isinstance(accel, MovingScene)
     if moving and first_seg is None:
         raise ValueError("lambert_paths: a scene with moving bodies needs first_seg")
