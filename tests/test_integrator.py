@@ -388,3 +388,28 @@ def test_an_area_light_reads_a_pending_doppler_shift_as_the_shifted_lanes(tmp_pa
     integrator.cross_area_lights(sc, pending, rays, hits, n, 0, 4)
     assert np.all(at_once.L.sum(axis=1) > 0.0)  # every ray crossed the light
     np.testing.assert_allclose(pending.L, at_once.L, rtol=2e-5)
+
+
+def test_a_triangles_record_holds_its_tables_rows_in_one_aligned_cache_line():
+    """integrator.triangle_records: the SIMD lanes read a hit's triangle from one 64-byte
+    row (v0, e1, e2, ng, area, light pmf, material), equal to the tables the other kernels
+    read, each row on a 64-byte boundary; a material index float32 cannot hold is
+    refused."""
+    rng = np.random.default_rng(3)
+    tris = rng.normal(size=(1000, 3, 3))
+    geo = integrator.triangle_geometry(tris, np.array([0.5, -1.0, 2.0]))
+    mats = rng.integers(0, 40, 1000).astype(np.int32)
+    mats[-1] = (1 << 24) - 1  # the largest index float32 holds exactly
+    pmf = rng.random(1000).astype(np.float32)
+    rec = integrator.triangle_records(geo, mats, pmf)
+    assert rec.shape == (1000, 16) and rec.dtype == np.float32
+    assert rec.ctypes.data % 64 == 0 and rec.strides == (64, 4)
+    for col, key in ((integrator.REC_V0, "v0"), (integrator.REC_E1, "e1"),
+                     (integrator.REC_E2, "e2"), (integrator.REC_NG, "ng")):
+        np.testing.assert_array_equal(rec[:, col:col + 3], geo[key])
+    np.testing.assert_array_equal(rec[:, integrator.REC_AREA], geo["area"])
+    np.testing.assert_array_equal(rec[:, integrator.REC_PMF], pmf)
+    np.testing.assert_array_equal(rec[:, integrator.REC_MAT].astype(np.int64), mats)
+    mats[0] = 1 << 24
+    with pytest.raises(ValueError, match="2\\*\\*24"):
+        integrator.triangle_records(geo, mats, pmf)

@@ -84,6 +84,13 @@ from .environment import (
 )
 from .integrator import (
     FAST_MATH,
+    REC_AREA,
+    REC_E1,
+    REC_E2,
+    REC_MAT,
+    REC_NG,
+    REC_PMF,
+    REC_V0,
     RR_DEPTH,
     KernelScene,
     column,
@@ -91,7 +98,6 @@ from .integrator import (
     lerp,
     offset_point,
     shading_normal,
-    surface_point,
     vertex_normal,
     wavefront_buffers,
 )
@@ -152,6 +158,18 @@ def fill_packet(ray, path, hit, hitf, valid):  # pragma: no cover - compiled
         valid[lane] = -1 if path[lane] >= 0 else 0
 
 
+@njit(nogil=True, error_model="numpy", inline="always")
+def record_point(rec, tri, b1, b2):  # pragma: no cover - compiled
+    """A hit's triangle from its record (:func:`.integrator.triangle_records`): the point
+    v0 + b1 e1 + b2 e2, the unit geometric normal, the area, the light pmf and the
+    material, as :func:`.integrator.surface_point` and the triangle tables give them."""
+    return ((rec[tri, REC_V0] + b1 * rec[tri, REC_E1] + b2 * rec[tri, REC_E2],
+             rec[tri, REC_V0 + 1] + b1 * rec[tri, REC_E1 + 1] + b2 * rec[tri, REC_E2 + 1],
+             rec[tri, REC_V0 + 2] + b1 * rec[tri, REC_E1 + 2] + b2 * rec[tri, REC_E2 + 2]),
+            (rec[tri, REC_NG], rec[tri, REC_NG + 1], rec[tri, REC_NG + 2]),
+            rec[tri, REC_AREA], rec[tri, REC_PMF], np.int64(rec[tri, REC_MAT]))
+
+
 @njit(**_LANES)
 def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce, smooth,
                general):  # pragma: no cover - compiled
@@ -160,9 +178,11 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
     the throughput into ``acc`` (MIS-weighted against NEE, w = p_bsdf² / (p_bsdf² +
     p_light²), p_light = p_sel t² / (A |cos θ_g|); the camera ray w = 1), ρ(λ) per lane,
     the offset ε(p), the light's pair of numbers, whether the path goes on (``cont``).
-    ``geo``, ``mats``, ``lanes``, ``bounce``: :func:`lane_paths`' tuples."""
-    v0, e1, e2, ng, area, tri_mat, vn, has_vn = geo
-    refl, emit, emit_row, one_sided, tri_pmf = mats[:5]
+    The hit's triangle comes from its packed record (``geo[8]``,
+    :func:`.integrator.triangle_records`). ``geo``, ``mats``, ``lanes``, ``bounce``:
+    :func:`lane_paths`' tuples."""
+    vn, rec = geo[6], geo[8]
+    refl, emit, emit_row, one_sided = mats[:4]
     sky_pmf, sky_row = mats[-2:]
     path, key, depth, ray, thr, li, lf, acc, prev_pdf = lanes
     pt, gn, nrm, eps, rho, ua, pos, _, cont, _ = bounce
@@ -175,7 +195,7 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
         t = hitf[TFAR * W + lane]
         b1, b2 = hitf[HIT_U * W + lane], hitf[HIT_V * W + lane]
         dep = depth[lane]
-        p, g = surface_point(v0, e1, e2, ng, tri, b1, b2)
+        p, g, a_tri, pm, m = record_point(rec, tri, b1, b2)
         g, front, cos_g = face_forward(g, dx, dy, dz)
         gn[0, lane], gn[1, lane], gn[2, lane] = g
         # the shading normal: the interpolated vertex normal on g's side (flat: g)
@@ -186,14 +206,12 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
             nrm[0, lane], nrm[1, lane], nrm[2, lane] = (np.float64(g[0]), np.float64(g[1]),
                                                         np.float64(g[2]))
         pt[0, lane], pt[1, lane], pt[2, lane] = p
-        m = tri_mat[tri]
         er = emit_row[m]
         lit = h and er >= 0 and (front or one_sided[m] == 0)
-        pm = tri_pmf[tri]
         wt = 1.0
         if dep > 0 and pm > 0.0:
             wt = power_heuristic(prev_pdf[lane], lightmod.triangle_light_pdf(
-                pm, area[tri], t, cos_g))
+                pm, a_tri, t, cos_g))
         # a ray that escapes sees the sky (MIS against NEE towards it; not the camera ray
         # on a transparent film)
         sky = False
@@ -226,7 +244,7 @@ def texture_lanes(geo, tex, mats, nlanes, lamu, hit, hitf, lanes, bounce, cone,
     table coordinates (a lane's are row ``path[lane]``); ``cone``: the lanes' (width,
     spread) rows; ``scratch``: one lane's base colour, ρ, and its throughput, columns,
     emission and table coordinates for :func:`.whole_paths.texture_emission`."""
-    _, e1, e2, ng, area, tri_mat, vn, has_vn = geo
+    _, e1, e2, ng, area, tri_mat, vn, has_vn = geo[:8]
     (_, _, _, _, _, _, _, _, t_mat_flag, _, t_estr, _, t_uvir, _, t_cscale, t_cdata, t_d65,
      t_rgb, _, _, _) = tex
     mat_alpha, emit, one_sided = mats
@@ -517,8 +535,8 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
                    l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_mguide,
-                   env_cguide, env_pmf, env_rot, env_row, eps_base, tex, keys, o, d, lamu,
-                   spread, nlanes, max_depth, sky_seen, L, first_t,
+                   env_cguide, env_pmf, env_rot, env_row, eps_base, tex, tri_rec, keys, o, d,
+                   lamu, spread, nlanes, max_depth, sky_seen, L, first_t,
                    log):  # pragma: no cover - compiled
         """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
         the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
@@ -591,7 +609,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                 thr[j, lane], li[j, lane], lf[j, lane], acc[j, lane] = 0.0, 0, 0.0, 0.0
                 rho[j, lane], nee[j, lane] = 0.0, 0.0
                 elam[j, lane], ebase[j, lane] = 0.0, 0.0
-        geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn)
+        geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn, tri_rec)
         mats = (refl, emit, emit_row, one_sided, tri_pmf, l_kind, l_prim, l_pos, l_dir, l_row,
                 l_scale, l_spot, l_cdf, sky_pmf, sky_row)
         lanes = (path, key, depth, ray, thr, li, lf, acc, prev_pdf)
@@ -742,7 +760,7 @@ def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
                sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
                sc.tri_pmf, sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond,
                sc.env_mguide, sc.env_cguide, sc.env_pmf, float(sc.env_rot), int(sc.env_row),
-               float(sc.eps), sc.tex, keys, o, d, lamu,
+               float(sc.eps), sc.tex, sc.tri_rec, keys, o, d, lamu,
                whole_paths.cone_spread(sc, spread, len(keys)), nlanes, max_depth, sky_seen, L,
                first_t, NO_LOG if log is None else log)
 
