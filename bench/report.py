@@ -333,6 +333,114 @@ def headline(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
     return rows
 
 
+def _pair(vals: Sequence[float]) -> str:
+    """Two levels' ratios as "high / low"."""
+    return " / ".join(f"{v:.2f}" for v in vals)
+
+
+def headline_12(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """The goals of issue 12 (performance round 2) against the measured figures: goal,
+    target, measured, met, and for a goal not met the floor or the cost that stops it
+    (the section that measures it)."""
+    rows: list[dict[str, Any]] = []
+    pf = {r["scene"]: r for r in d["path_floor"]}
+    for scene, goal, why in (
+            ("cornell", 0.60, "§6: outside Embree the lanes' gathers, Sobol numbers, light "
+                              "sample and scalar refill"),
+            ("heavy", 0.70, "§6: the hit gathers of 1 M triangles miss the caches")):
+        if _num(pf.get(scene, {}).get("lanes_embree_share")):
+            share = pf[scene]["lanes_embree_share"]
+            rows.append({"goal": f"Embree's share of the CPU time, {scene} (SIMD lanes; "
+                                 "Embree alone on their packets, §6)",
+                         "target": f"≥ {100 * goal:.0f} %",
+                         "measured": f"{100 * share:.1f} %",
+                         "met": share >= goal, "stops": why})
+    cyc = [r for r in d["equal_error"] if r["metric"] == "rel_mse" and r["a"] == "relray"
+           and r["b"] == "cycles" and r["clock"] == "cpu_s"]
+    if cyc:
+        vals = [r["ratio_a_over_b"] for r in cyc]
+        rows.append({"goal": "equal-error CPU time ÷ Cycles, Cornell box (rel. MSE, high / "
+                             "low level, §2)", "target": "≤ 0.25", "measured": _pair(vals),
+                     "met": all(v <= 0.25 for v in vals),
+                     "stops": "the work around the kernel (camera, hero wavelengths, film; "
+                              "§6's per-scene profile) and the lanes' shading"})
+    peer: dict[tuple[str, str], list[float]] = {}
+    for r in d["peer_equal_error"]:
+        if r["metric"] == "rel_mse":
+            peer.setdefault((r["scene"], r["peer"]), []).append(
+                float(r["ratio_relray_over_peer"]))
+    for r in d["mitsuba_equal_error"]:
+        if r["metric"] == "rel_mse":
+            peer.setdefault(("cornell", r["peer"]), []).append(
+                float(r["ratio_relray_over_peer"]))
+    for scene in ("heavy", "environment"):
+        vals = peer.get((scene, "cycles"))
+        if vals:
+            rows.append({"goal": f"equal-error CPU time ÷ Cycles, {scene} scene (§2)",
+                         "target": "≤ 0.5", "measured": _pair(vals),
+                         "met": all(v <= 0.5 for v in vals), "stops": ""})
+    floor = moving_floor_bound(d)
+    floor_s = moving_floor_bound(d, "scalar_spectral")
+    stops = {
+        ("environment", "llvm_ad_spectral"): "the map's lookups in the lanes (§6: sigmoids, "
+                                             "searches, escaping rays) and the work around "
+                                             "the kernel; not a floor",
+        ("textured", "llvm_ad_spectral"): "the texture lookups, scalar calls per lane (§6 "
+                                          "next steps); not a floor",
+        ("moving", "llvm_ad_spectral"): (
+            f"**floor**: the rest-frame traversal of each body alone bounds it at "
+            f"{_pair(floor)} (§6, the moving scene's floor)" if floor else
+            "the rest-frame traversal of each body (§5b, §6)"),
+        ("moving", "scalar_spectral"): (
+            f"the rest-frame traversal of each body alone bounds it at {_pair(floor_s)} "
+            "(§6, the moving scene's floor)" if floor_s else
+            "the rest-frame traversal of each body (§5b, §6)"),
+        ("cornell", "llvm_ad_spectral"): "noise at the low level; §6",
+    }
+    for name, pe, target in (("`llvm_ad_spectral`", "llvm_ad_spectral", 1.0),
+                             ("`scalar_spectral`", "scalar_spectral", 0.4)):
+        for scene in ("cornell", "heavy", "environment", "textured", "moving"):
+            vals = peer.get((scene, pe))
+            if not vals:
+                continue
+            met = all(v <= target for v in vals)
+            rows.append({"goal": f"equal-error CPU time ÷ Mitsuba 3 {name}, {scene} (§2)",
+                         "target": f"≤ {target:g}", "measured": _pair(vals), "met": met,
+                         "stops": "" if met else stops.get((scene, pe), "§2, §6")})
+    load = {r["renderer"]: r for r in d["peer_load"]}
+    mits = [r for k, r in load.items() if k != "relray"]
+    if "relray" in load and mits:
+        best = min(float(r["load_s"]) for r in mits)
+        rows.append({"goal": "loading a 1 M-triangle mesh and building its BVH (§2)",
+                     "target": "no slower than Mitsuba",
+                     "measured": f"{load['relray']['load_s']:.2f} s against {best:.2f} s",
+                     "met": load["relray"]["load_s"] <= best, "stops": ""})
+    sc = d["scaling"]
+    if len(sc) > 1:
+        s2 = sc[-1]
+        rows.append({"goal": "2 threads against 1 (paths per wall-second, §3)",
+                     "target": "≥ 1.9×", "measured": f"{s2['speedup_wall']:.2f}×",
+                     "met": s2["speedup_wall"] >= 1.9, "stops": ""})
+    base = d["textures_baseline"]
+    if len(base) == 2:
+        r = base[-1]
+        rows.append({"goal": "the static, untextured Cornell box against the code "
+                             f"{base[0]['code']} (§5e)", "target": "no slower",
+                     "measured": f"{r['over_before']:.2f}× its paths per CPU-second",
+                     "met": r["over_before"] >= 1.0, "stops": ""})
+    warm = [r for r in d["first_cli"] if r["case"] == "warm"]
+    if warm:
+        w = warm[0]
+        rows.append({"goal": "first 1-spp Cornell image from `relray render`, warm kernel "
+                             "cache (§5c)", "target": "≤ 1 s",
+                     "measured": f"{w['wall_s']:.2f} s (imports {w['import_s']:.2f} s)",
+                     "met": w["wall_s"] <= 1.0,
+                     "stops": "**floor**: importing numba and loading its typing registries "
+                              "at the first cached kernel take about 1 s before relray "
+                              "works (§5c)"})
+    return rows
+
+
 def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
               plots: dict[str, Path], out: Path, md: Path) -> str:
     mach = meta.get("machine", {})
@@ -381,6 +489,17 @@ def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
                    ("measured", "measured", ""),
                    ("met", lambda r: "yes" if r["met"] else "**no**", "")]))
     add("\n(* extrapolated beyond the measured curve.)\n")
+    h12 = headline_12(d)
+    if h12:
+        add("## Headline: the goals of issue 12 (performance round 2)\n")
+        add("Each goal met, or the floor or the cost that stops it, with the section that "
+            "measures it. The equal-error ratios are CPU time at equal relative MSE, at "
+            "the two levels of §2 (high / low).\n")
+        add(table(h12, [("goal", "goal", ""), ("target", "target", ""),
+                        ("measured", "measured", ""),
+                        ("met", lambda r: "yes" if r["met"] else "**no**", ""),
+                        ("what stops it", lambda r: r["stops"] if not r["met"] else "", "")]))
+        add("")
 
     _section_convergence(add, d, plots, md, meta)
     _section_mitsuba(add, d, plots, md, meta)
@@ -1410,7 +1529,7 @@ def _section_textures(add, d) -> None:
         add("**Scenes without textures** pay one load and branch per hit (the material's "
             "texture flag) and nothing else (no ray cones: `TextureTable.enabled` is off). "
             f"presets/cornell.toml, {a0['spp']:.0f} spp, 1 thread, `bench/throughput.py` "
-            "with this code and with the code before textures (`bench/textures.py "
+            f"with this code and with the code {a0['code']} (`bench/textures.py "
             f"--baseline`), alternated, median of {a0['rounds']:.0f}; the runs scatter by "
             "±10 % on this shared machine:\n")
         add(table(ab, [("code", "code", ""),
@@ -1704,25 +1823,46 @@ def _section_path_floor(add, d) -> None:
         add(text + "\n")
 
 
-def moving_floor(d) -> str:
-    """The floor of the moving scene against `llvm_ad_spectral` (§6's path floor, §2's
-    Cornell ratios, the per-scene profile's work outside the kernels), as a paragraph;
-    empty without the measurements."""
+def moving_floor_bound(d, peer: str = "llvm_ad_spectral") -> list[float]:
+    """The moving scene's lower bound of its equal-error ratio to Mitsuba's ``peer`` at
+    the two levels (:func:`moving_floor`), empty without the measurements."""
+    parts = _moving_floor_parts(d, peer)
+    if not parts:
+        return []
+    m, c, eq, out = parts
+    bound = (m["embree_ns"] + out) / (c["lanes_ns"] + out)
+    return [bound * eq[0], bound * eq[1]]
+
+
+def _moving_floor_parts(d, peer: str = "llvm_ad_spectral"):
+    """(the moving and the Cornell path floors, Cornell's ratios to Mitsuba's ``peer`` by
+    level, the renderer's ns per path outside the kernel scaled to the floor's run), or
+    None without the measurements."""
     pf = {r["scene"]: r for r in d["path_floor"]}
     m, c = pf.get("moving", {}), pf.get("cornell", {})
     eq = {int(r["level_index"]): float(r["ratio_relray_over_peer"])
           for r in d["mitsuba_equal_error"]
-          if r["peer"] == "llvm_ad_spectral" and r["metric"] == "rel_mse"}
+          if r["peer"] == peer and r["metric"] == "rel_mse"}
     prof = {r["stage"]: r["ns_per_path"] for r in d["profile_scenes"]
             if r["scene"] == "cornell"}
     kern = prof.get("lane-path kernel (16 paths in SIMD lanes, with its Embree packets)", 0.0)
     if not (_num(m.get("embree_ns")) and _num(c.get("lanes_ns")) and 0 in eq and 1 in eq
             and kern > 0):
+        return None
+    # the profile's own run may be slower or faster than the floor's: its work outside the
+    # kernel scaled to the floor's run by the lane kernel's two figures
+    out = (prof["total"] - kern) * c["lanes_ns"] / kern
+    return m, c, eq, out
+
+
+def moving_floor(d) -> str:
+    """The floor of the moving scene against `llvm_ad_spectral` (§6's path floor, §2's
+    Cornell ratios, the per-scene profile's work outside the kernels), as a paragraph;
+    empty without the measurements."""
+    parts = _moving_floor_parts(d)
+    if not parts:
         return ""
-    out = prof["total"] - kern  # the renderer's work outside the kernel, per path
-    # the profile's own run may be slower or faster than the floor's: its outside work
-    # scaled to the floor's run by the lane kernel's two figures
-    out *= c["lanes_ns"] / kern
+    m, c, eq, out = parts
     bound = (m["embree_ns"] + out) / (c["lanes_ns"] + out)
     return (
         f"**The moving scene's floor.** Its rest-frame traversal alone costs "

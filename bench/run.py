@@ -92,6 +92,9 @@ class Plan:
     tex_spp: int = 16
     tex_rounds: int = 3
     first_render: bool = True  # three Blender sessions, two of them compiling kernels
+    # the untextured Cornell box against the code before the second wave (its kernels
+    # compile in a child process first: a minute)
+    tex_baseline: bool = True
     anim_frames: int = 24
     anim_separate: int = 24
     anim_spp: int = 16
@@ -112,7 +115,7 @@ QUICK = Plan("quick", tp_size=256, tp_spp=8, tp_repeat=3, scale_spp=8, scale_rep
              moving_size=64, moving_spp=8, moving_repeat=2, moving_pairs=4,
              moving_rays=20_000, env_size=(48, 32),
              env_spp=(4, 16), env_bsdf_spp=(16, 256), env_ref_spp=512, env_repeat=1,
-             tex_size=64, tex_spp=8, tex_rounds=2, first_render=False,
+             tex_size=64, tex_spp=8, tex_rounds=2, first_render=False, tex_baseline=False,
              anim_frames=8, anim_spp=2, anim_separate=1, wait_idle_s=0.0,
              conv=convergence.ConvergenceConfig(width=64, height=64,
                                                 spp=[4, 8, 16, 32, 64, 128],
@@ -133,6 +136,7 @@ SMOKE = Plan("smoke", tp_size=16, tp_spp=2, tp_repeat=1, scale_spp=2, scale_repe
              moving_repeat=1, moving_pairs=2, moving_rays=2_000, env_size=(8, 8),
              env_spp=(1, 2), env_bsdf_spp=(2, 4),
              env_ref_spp=8, env_repeat=1, tex_size=8, tex_spp=1, tex_rounds=1,
+             tex_baseline=False,
              first_render=False, anim_frames=0, anim_separate=0,
              anim_spp=1, wait_idle_s=0.0, probe_s=0.05, floor_rays=1 << 10,
              conv=convergence.ConvergenceConfig(width=8, height=8, spp=[1, 2, 4],
@@ -258,6 +262,9 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
         section("textures")
         cm.write_csv(out / "textures.csv", textures.rows(plan.tex_spp, plan.tex_size,
                                                          threads, plan.tex_rounds))
+        if plan.tex_baseline:
+            cm.write_csv(out / "textures_baseline.csv",
+                         textures.second_wave_rows(tmp, 16, max(plan.tex_rounds, 5)))
         done("textures")
     if "first" in sections and plan.first_render:
         section("first")

@@ -113,6 +113,23 @@ def baseline_rows(baseline: Path, spp: int, rounds: int,
              "runs": " ".join(f"{x:.0f}" for x in v)} for k, v in rates.items()]
 
 
+#: the last revision before the second wave (moving bodies, textures, environment maps,
+#: stars, the viewport; issue 12's regression check)
+SECOND_WAVE_BASE = "9dcd0fe^"
+
+
+def second_wave_rows(tmp: Path, spp: int, rounds: int) -> list[dict]:
+    """:func:`baseline_rows` against the code of :data:`SECOND_WAVE_BASE` (unpacked from
+    git into ``tmp``): the static, untextured Cornell box before the second wave and now."""
+    base = Path(tmp) / "second_wave_base" / "relray"
+    base.mkdir(parents=True, exist_ok=True)
+    archive = subprocess.run(["git", "archive", SECOND_WAVE_BASE], cwd=cm.REPO,
+                             capture_output=True, check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(base)], input=archive, check=True)
+    return baseline_rows(base, spp, rounds,
+                         (f"before the second wave ({SECOND_WAVE_BASE})", "this code"))
+
+
 def main() -> None:
     """The command line (module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -122,6 +139,9 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--baseline", type=Path, help="a copy of the code before textures "
                     "(the folder named relray): also measure the untextured cost")
+    ap.add_argument("--baseline-label", default="before textures",
+                    help="what the baseline code is, for the table (e.g. 'before the "
+                    "second wave (9dcd0fe^)')")
     ap.add_argument("--csv", type=Path, help="folder to write textures.csv (and "
                     "textures_baseline.csv) into, e.g. bench/results")
     a = ap.parse_args()
@@ -134,7 +154,8 @@ def main() -> None:
     if a.csv:
         cm.write_csv(a.csv / "textures.csv", tex)
     if a.baseline:
-        ab = baseline_rows(a.baseline.resolve(), 16, a.rounds)
+        ab = baseline_rows(a.baseline.resolve(), 16, a.rounds,
+                           (a.baseline_label, "this code"))
         for r in ab:
             print(f"  {r['code']:16s} {r['paths_per_cpu_s'] / 1e6:.3f} M paths/CPU-s  "
                   f"×{r['over_before']:.3f}  ({r['runs']})")

@@ -351,13 +351,16 @@ def wrap_index(i, n, mode):
 # The lookups read arrays, so they are inlined and straight-line (selects, no branch or
 # loop), as integrator.py's device functions: numba then keeps no reference counts on the
 # arrays (a call, or a branch, costs atomic increments per lookup). They are inlined into
-# slot_texel, which shade calls without inlining it (its five call sites made up a third
-# of shade's compile time, issue 12); slot_texel runs without numba's reference counting
-# (``_nrt=False``: it allocates nothing and only reads the arrays its caller holds), so
-# the call passes the arrays without atomic reference-count updates. So do the other
-# functions shade calls per textured hit (triangle_uv, normal_mapped, texel_reflectance,
-# texel_emission): compiled with reference counting, each call counted its array
-# arguments up and down again (6 % of the textured scene's time, perf).
+# slot_texel_of. shade calls slot_texel, which wraps it compiled apart (its five call
+# sites inlined made up a third of shade's compile time, issue 12); the Lambert kernels
+# (whole paths, SIMD lanes) inline the ``_of`` forms (whole_paths.lambert_texels): a
+# compiled-apart call copies seven array structures, and the textured box's CPU per path
+# was 1.15× with the calls (bench/ab.py, 6 pairs). slot_texel runs without numba's
+# reference counting (``_nrt=False``: it allocates nothing and only reads the arrays its
+# caller holds), so the call passes the arrays without atomic reference-count updates.
+# So do the other functions shade calls per textured hit (triangle_uv, normal_mapped,
+# texel_reflectance, texel_emission): compiled with reference counting, each call counted
+# its array arguments up and down again (6 % of the textured scene's time, perf).
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
@@ -406,9 +409,20 @@ def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def slot_texel(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
                u, v, lod_geo):
+    """:func:`slot_texel_of`, compiled apart (for ``integrator.shade``: five call sites
+    inlined made up a third of its compile time)."""
+    return slot_texel_of(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod,
+                         m, slot, u, v, lod_geo)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def slot_texel_of(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
+                  u, v, lod_geo):
     """The factor-weighted RGBA texel of material m's ``slot`` at the triangle's (u, v)
     (before the slot's UV map) and the hit's geometric level of detail ``lod_geo``
-    (½ log2(a_uv/a_w) + log2(cone width/|cos θ|), module docstring)."""
+    (½ log2(a_uv/a_w) + log2(cone width/|cos θ|), module docstring). Inlined where the
+    Lambert kernels call it (:func:`.whole_paths.lambert_texels`): a compiled-apart call
+    copies seven array structures."""
     a = mat_uv[m, slot]
     su = a[0] * u + a[1] * v + a[2]
     sv = a[3] * u + a[4] * v + a[5]
@@ -425,10 +439,16 @@ def spectral_modes_with_table(mode: str) -> bool:
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def base_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out):
+    """:func:`base_texel_of`, compiled apart (for ``integrator.shade``)."""
+    base_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def base_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out):
     """Material m's base-colour texel at (u, v) (level of detail ``lod``), each channel
     clamped to [0, 1], into ``out[:3]`` (linear Rec.709)."""
-    r, g, b, _ = slot_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
-                            np.int64(BASE), u, v, lod)
+    r, g, b, _ = slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
+                               np.int64(BASE), u, v, lod)
     out[0] = min(max(r, 0.0), 1.0)
     out[1] = min(max(g, 0.0), 1.0)
     out[2] = min(max(b, 0.0), 1.0)
@@ -437,22 +457,38 @@ def base_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v,
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def scalar_texel(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod, m, slot, u,
                  v, lod):
+    """:func:`scalar_texel_of`, compiled apart (for ``integrator.shade``)."""
+    return scalar_texel_of(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod,
+                           m, slot, u, v, lod)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def scalar_texel_of(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod, m, slot,
+                    u, v, lod):
     """The channel a scalar slot (``ROUGHNESS``, ``METALLIC``) of material m reads at
     (u, v), clamped to [0, 1]."""
-    t = slot_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot, u, v,
-                   lod)
+    t = slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot, u, v,
+                      lod)
     return min(max(channel(t, mat_ch[m, slot]), 0.0), 1.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def normal_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, scale,
                  n0, e1, e2, tri, duv1, duv2):
+    """:func:`normal_texel_of`, compiled apart (for ``integrator.shade``)."""
+    return normal_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v,
+                           lod, scale, n0, e1, e2, tri, duv1, duv2)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def normal_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod,
+                    scale, n0, e1, e2, tri, duv1, duv2):
     """The (unnormalised) normal of material m's normal map at (u, v) on triangle ``tri``
     with interpolated or geometric front normal ``n0``: :func:`normal_mapped` of its
     texel (``scale``: glTF normalTexture.scale)."""
-    t = slot_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
-                   np.int64(NORMAL), u, v, lod)
-    return normal_mapped(t, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m)
+    t = slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
+                      np.int64(NORMAL), u, v, lod)
+    return normal_mapped_of(t, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -469,6 +505,12 @@ def channel(t, c):
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def triangle_uv(tri_uv, tri, b1, b2):
+    """:func:`triangle_uv_of`, compiled apart (for ``integrator.shade``)."""
+    return triangle_uv_of(tri_uv, tri, b1, b2)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def triangle_uv_of(tri_uv, tri, b1, b2):
     """The UV at barycentrics (b1, b2) of triangle ``tri`` and its UV edges
     (uv1 - uv0, uv2 - uv0)."""
     u0, v0 = tri_uv[tri, 0, 0], tri_uv[tri, 0, 1]
@@ -489,6 +531,12 @@ def hit_lod(duv1, duv2, area, width, cos_g):
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
+    """:func:`normal_mapped_of`, compiled apart (for ``integrator.shade``)."""
+    return normal_mapped_of(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def normal_mapped_of(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     """The normal of a tangent-space normal map's texel (r, g, b) ∈ [0, 1]³ at a hit
     whose interpolated (or geometric) normal is ``n0`` (on the triangle's front side):
 

@@ -124,15 +124,15 @@ from .textures import (
     METALLIC,
     NORMAL,
     ROUGHNESS,
-    base_texel,
+    base_texel_of,
     bounce_spread,
     hit_lod,
-    normal_texel,
-    scalar_texel,
-    slot_texel,
+    normal_texel_of,
+    scalar_texel_of,
+    slot_texel_of,
     texel_emission,
     texel_reflectance,
-    triangle_uv,
+    triangle_uv_of,
 )
 
 _INV_PI = 1.0 / math.pi
@@ -538,34 +538,36 @@ def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, a
     ``a`` and ``n`` pass through where the material has no such texture. ``geo``: (area,
     e1, e2, ng, vn, has_vn). Shared by the whole paths and the SIMD lanes
     (:func:`.lane_paths.texture_lanes`), inlined into both (a call would copy the texture
-    table's 21 array structures: 1.15× the textured box's CPU per path); the lookups it
-    makes are compiled apart."""
+    table's 21 array structures: 1.15× the textured box's CPU per path); so are the
+    lookups it makes (the ``_of`` forms of :mod:`.textures`: compiled apart, they cost
+    1.15× too, 2026-11-27), except the texel's spectrum."""
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod, _,
      t_nscale, _, _, _, t_tri_uv, _, _, _, _, _, _, _) = tex
     area, e1, e2, ng, vn, has_vn = geo
-    uv, duv1, duv2 = triangle_uv(t_tri_uv, tri, b1, b2)
+    uv, duv1, duv2 = triangle_uv_of(t_tri_uv, tri, b1, b2)
     lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
     base = t_mat_tex[m, BASE] >= 0
     if base:
-        base_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor, t_mat_lod, m,
-                   uv[0], uv[1], lod, alb)
+        base_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor, t_mat_lod,
+                      m, uv[0], uv[1], lod, alb)
     if t_mat_tex[m, ROUGHNESS] >= 0:
-        r_ = scalar_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor,
-                          t_mat_lod, m, np.int64(ROUGHNESS), uv[0], uv[1], lod)
+        r_ = scalar_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
+                             t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0], uv[1],
+                             lod)
         a = max(r_ * r_, 1e-4)
     if t_mat_tex[m, NORMAL] >= 0:
         n0 = (ng[tri, 0], ng[tri, 1], ng[tri, 2])
         if has_vn:
             n0 = vertex_normal(vn, tri, b1, b2)
-        n = shading_normal(normal_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                        t_mat_factor, t_mat_lod, m, uv[0], uv[1], lod,
-                                        t_nscale[m], n0, e1, e2, tri, duv1, duv2), g, d[0],
-                           d[1], d[2])
+        n = shading_normal(normal_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
+                                           t_mat_factor, t_mat_lod, m, uv[0], uv[1], lod,
+                                           t_nscale[m], n0, e1, e2, tri, duv1, duv2), g,
+                           d[0], d[1], d[2])
     lit = emits and t_mat_tex[m, EMISSION] >= 0
     etex = (0.0, 0.0, 0.0, 0.0)
     if lit:
-        etex = slot_texel(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                          t_mat_lod, m, np.int64(EMISSION), uv[0], uv[1], lod)
+        etex = slot_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                             t_mat_lod, m, np.int64(EMISSION), uv[0], uv[1], lod)
     return base, a, n, lit, etex
 
 
