@@ -1788,18 +1788,22 @@ def _section_path_floor(add, d) -> None:
             + (f" and {100 * h['lanes_embree_share']:.0f} % on the heavy scene"
                if _num(h.get("lanes_embree_share")) else "")
             + " (goals 60 % and 70 %). What stays outside Embree is gathers: each hit "
-            "reads its triangle (vertex, edges, normal, area, light pmf, material: seven "
-            "tables) and eight columns of the reflectance and emission tables per lane, "
-            "scattered over memory on the heavy scene (its 1 M triangles miss the caches: "
-            "outside Embree a heavy path costs "
+            "reads its triangle (vertex, edges, normal, area, light pmf, material: one "
+            "64-byte record since 2026-11-27 09:10, `integrator.triangle_records`, seven "
+            "tables before) and eight columns of the reflectance and emission tables per "
+            "lane, scattered over memory on the heavy scene (its 1 M triangles miss the "
+            "caches: outside Embree a heavy path costs "
             + (f"{h['lanes_other_ns']:.0f} ns against the box's {c['lanes_other_ns']:.0f}"
                f", and {h['whole_other_ns']:.0f} ns one path at a time: there the lanes "
                f"gain in Embree alone, its packets {h['embree16_ns']:.0f} ns against "
                f"{h['embree_ns']:.0f}, so Embree's share falls"
                if _num(h.get("lanes_other_ns")) else "more than the box's")
             + "); the lanes' refill from the queue and the radiance written back are "
-            "scalar. A packed record per triangle (one cache line instead of seven tables) "
-            "cut the heavy scene's lanes by 6 % by hand (next steps). On the "
+            "scalar. The packed record took the heavy scene's lanes outside Embree from "
+            "396 to 297 ns per path (path_floor, 06:39 against 09:10) and its Embree share "
+            "from 64 % to 70 %; the renderer's CPU per path on the heavy scene 0.95× "
+            "(`bench.ab e542f82 --scene heavy`, 6 pairs, quartiles 0.88–1.05), the Cornell "
+            "box 0.99× (8 pairs, 0.95–1.02). On the "
             "environment-lit scene the lanes cost "
             + (f"{e['lanes_ns']:.0f} ns against {e['whole_ns']:.0f} one path at a time "
                f"({e['lanes_over_whole']:.2f}×); Embree's packets {e['embree16_ns']:.0f} ns "
@@ -1965,6 +1969,39 @@ def peer_ratios(d, scene: str) -> tuple[dict, str]:
     return ratio, text
 
 
+def _floors_bullet(add, d) -> None:
+    """The 2026-11-27 late-morning round: the goals table, the moving scene's floor, the
+    packed triangle record, the inlined texture lookups."""
+    pf = {r["scene"]: r for r in d["path_floor"]}
+    h = pf.get("heavy", {})
+    heavy = (f"in §6's run the heavy scene's lanes spend {h['lanes_other_ns']:.0f} ns per "
+             f"path outside Embree and Embree's share is {100 * h['lanes_embree_share']:.1f} %"
+             if _num(h.get("lanes_other_ns")) else "")
+    bound = moving_floor_bound(d)
+    add("- **The goals of issue 12 in one table** (the headline above), each met or with "
+        "the floor or the cost that stops it. **The moving scene's floor** (§6): whole "
+        "paths now record each ray's lab time, the segment it leaves and its rest-frame "
+        "form (`whole_paths.ray_log`; `tests/test_whole_paths.py` traces the log again "
+        "and finds the kernel's own hits), so `bench/path_floor.py` replays the moving "
+        "scene's rays through the rest-frame traversal alone: "
+        + (f"it bounds that scene's ratio to `llvm_ad_spectral` at {_pair(bound)}, above "
+           "the goal of 1 whatever the shading costs" if bound else "the bound needs §2's "
+           "Mitsuba run")
+        + ". **A packed record per triangle** for the SIMD lanes' hits "
+        "(`integrator.triangle_records`: v0, edges, normal, area, light pmf, material in "
+        "one 64-byte row; `tests/test_integrator.py`): "
+        + (heavy + " (396 ns and 64 % at 06:39)" if heavy else "the heavy scene's lanes "
+           "outside Embree 396 → 297 ns per path")
+        + "; the renderer's CPU per path 0.95× on the heavy scene (`bench.ab e542f82 "
+        "--scene heavy`, 6 pairs, quartiles 0.88–1.05), 0.99× on the box (8 pairs, "
+        "0.95–1.02), for 64 bytes more per triangle. **The texture lookups inlined** into "
+        "the Lambert kernels (`textures.*_of`, at one call site for the four slots; "
+        "`integrator.shade` keeps the compiled-apart wrappers): the textured box 0.89× "
+        "(`bench.ab 7a57ca7 --scene textured`, 6 pairs, quartiles 0.86–0.92); its lane "
+        "kernel's first compile 33 s against 23 s (78 s with a call site per slot, "
+        "0.87×).")
+
+
 def _env_lanes_bullet(add, d) -> None:
     """The 2026-11-27 morning round: colour environment maps in the SIMD lanes."""
     _, peers = peer_ratios(d, "environment")
@@ -2094,6 +2131,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _floors_bullet(add, d)
     _env_lanes_bullet(add, d)
     _textured_lanes_bullet(add, d)
     if lane_rows:
@@ -2359,20 +2397,17 @@ def _section_recommendations(add, d) -> None:
             f"wavelengths {_ns(d, 'camera:', 'hero:'):.0f} ns; the film "
             f"{_ns(d, 'film:'):.0f} ns.\n")
     add("Next steps, by expected gain:\n")
-    add("1. **SIMD lanes for moving bodies** (each body's rest-frame rays as a packet of "
-        "its own, the frame changes as lane arithmetic); then the moving scene would "
-        "follow the box. The environment map takes the lanes since 2026-11-27 05:40 (its "
-        "arcs as polynomials, its searches guided, above). The textured box takes "
-        "the lanes since 2026-11-27 02:20, its lookups scalar calls per lane (the "
-        "textured box's texture work is still about half its CPU per path: 1326 against "
-        "the plain box's 669 ns); the lookups as gathers (the atlas descriptors, the mip "
-        "level, four texels per lane) would be the next step there.")
-    add("2. **A packed record per triangle for the lanes' hit gathers** (the heavy "
-        "scene): vertex, edges, normal, area, light pmf and material in one 64-byte row "
-        "instead of seven tables, one cache miss per hit instead of up to seven; by hand "
-        "(2026-11-26 23:41, 200 k triangles) the lane kernel 0.84× its whole paths "
-        "against 0.91×, for 64 bytes more per triangle unless the row replaces the "
-        "tables (the wavefront and whole-path kernels read them too).")
+    add("1. **The texture lookups as gathers in the lanes** (the textured box): its "
+        "lookups are scalar code per lane, inlined since 2026-11-27 09:50 (0.89×, "
+        "`bench.ab 7a57ca7 --scene textured`, 6 pairs, quartiles 0.86–0.92), and still "
+        "about 40 % of its CPU per path (1181 against the plain box's ~690 ns); the "
+        "atlas descriptors, the mip level and the texels of sixteen lanes as vector code "
+        "would be the next step.")
+    add("2. **SIMD lanes for moving bodies** (each body's rest-frame rays as a packet of "
+        "its own, the frame changes as lane arithmetic): on the moving scene whole paths "
+        "spend about 600 ns per path outside the traversal (§6); the traversal itself "
+        "bounds the scene's ratio to `llvm_ad_spectral` above 1 (§6, the moving scene's "
+        "floor), so this would narrow the gap, not close it.")
     add("3. **The environment map's remaining costs** (the environment-lit scene, now in "
         "the lanes; `llvm_ad_spectral`'s goal still not met there): the texels' sigmoids "
         "(about 50 ns per path: four per texel and lane, each a square root and a "
@@ -2389,8 +2424,9 @@ def _section_recommendations(add, d) -> None:
         "other lobes as branches of the whole-path kernel (the wavefront stays for alpha "
         "masks, area-light quads and the denoising features).")
     add("6. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
-        f"`Film.add_samples`, {_ns(d, 'film:'):.0f} ns per path): one pass, no (N, 3) "
-        "array.")
+        f"`Film.add_samples`, {_ns(d, 'film:'):.0f} ns per path in §6's profile; "
+        "21 ns by hand, 13 + 8, 262 144 paths, 2026-11-27 09:14): one pass, no (N, 3) "
+        "array; at most 3 % of a Cornell path.")
     add("7. ~~**Cheaper random numbers**: `sobol2`'s bit reversals as LLVM's `bitreverse` "
         "intrinsic~~: nothing to gain (2026-11-27 03:08): LLVM already recognises "
         "`reverse32`'s mask steps as a bit reversal and compiles the lanes' to GFNI's "

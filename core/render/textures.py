@@ -353,14 +353,15 @@ def wrap_index(i, n, mode):
 # arrays (a call, or a branch, costs atomic increments per lookup). They are inlined into
 # slot_texel_of. shade calls slot_texel, which wraps it compiled apart (its five call
 # sites inlined made up a third of shade's compile time, issue 12); the Lambert kernels
-# (whole paths, SIMD lanes) inline the ``_of`` forms (whole_paths.lambert_texels): a
-# compiled-apart call copies seven array structures, and the textured box's CPU per path
-# was 1.15× with the calls (bench/ab.py, 6 pairs). slot_texel runs without numba's
-# reference counting (``_nrt=False``: it allocates nothing and only reads the arrays its
-# caller holds), so the call passes the arrays without atomic reference-count updates.
-# So do the other functions shade calls per textured hit (triangle_uv, normal_mapped,
-# texel_reflectance, texel_emission): compiled with reference counting, each call counted
-# its array arguments up and down again (6 % of the textured scene's time, perf).
+# (whole paths, SIMD lanes) inline the ``_of`` forms at one call site
+# (whole_paths.lambert_texels): a compiled-apart call copies seven array structures, and
+# the textured box's CPU per path was 1.12× with the calls (bench/ab.py, 6 pairs).
+# slot_texel runs without numba's reference counting (``_nrt=False``: it allocates nothing
+# and only reads the arrays its caller holds), so the call passes the arrays without
+# atomic reference-count updates. So do the other functions shade calls per textured hit
+# (triangle_uv, normal_mapped, texel_reflectance, texel_emission): compiled with reference
+# counting, each call counted its array arguments up and down again (6 % of the textured
+# scene's time, perf).
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
@@ -447,11 +448,16 @@ def base_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v,
 def base_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out):
     """Material m's base-colour texel at (u, v) (level of detail ``lod``), each channel
     clamped to [0, 1], into ``out[:3]`` (linear Rec.709)."""
-    r, g, b, _ = slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
-                               np.int64(BASE), u, v, lod)
-    out[0] = min(max(r, 0.0), 1.0)
-    out[1] = min(max(g, 0.0), 1.0)
-    out[2] = min(max(b, 0.0), 1.0)
+    base_colour(slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
+                              np.int64(BASE), u, v, lod), out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def base_colour(t, out):
+    """A base-colour texel ``t`` (RGBA), each channel clamped to [0, 1], into ``out[:3]``."""
+    out[0] = min(max(t[0], 0.0), 1.0)
+    out[1] = min(max(t[1], 0.0), 1.0)
+    out[2] = min(max(t[2], 0.0), 1.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
@@ -469,7 +475,13 @@ def scalar_texel_of(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_
     (u, v), clamped to [0, 1]."""
     t = slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot, u, v,
                       lod)
-    return min(max(channel(t, mat_ch[m, slot]), 0.0), 1.0)
+    return scalar_channel(t, mat_ch[m, slot])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def scalar_channel(t, c):
+    """Channel ``c`` of a scalar slot's texel ``t``, clamped to [0, 1]."""
+    return min(max(channel(t, c), 0.0), 1.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)

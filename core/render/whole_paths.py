@@ -124,11 +124,11 @@ from .textures import (
     METALLIC,
     NORMAL,
     ROUGHNESS,
-    base_texel_of,
+    base_colour,
     bounce_spread,
     hit_lod,
-    normal_texel_of,
-    scalar_texel_of,
+    normal_mapped_of,
+    scalar_channel,
     slot_texel_of,
     texel_emission,
     texel_reflectance,
@@ -539,36 +539,48 @@ def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, a
     e1, e2, ng, vn, has_vn). Shared by the whole paths and the SIMD lanes
     (:func:`.lane_paths.texture_lanes`), inlined into both (a call would copy the texture
     table's 21 array structures: 1.15× the textured box's CPU per path); so are the
-    lookups it makes (the ``_of`` forms of :mod:`.textures`: compiled apart, they cost
-    1.15× too, 2026-11-27), except the texel's spectrum."""
+    lookups it makes (the ``_of`` forms of :mod:`.textures`), except the texel's
+    spectrum: as compiled-apart calls they cost 1.12× the textured box's CPU per path
+    (`bench.ab 7a57ca7 --scene textured`: 0.89 inlined, 2026-11-27). The four slots share
+    one call site in a loop, which numba inlines once: with four call sites the textured
+    lane kernel's first compile took 78 s, with one 33 s (23 s with the calls)."""
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod, _,
      t_nscale, _, _, _, t_tri_uv, _, _, _, _, _, _, _) = tex
     area, e1, e2, ng, vn, has_vn = geo
     uv, duv1, duv2 = triangle_uv_of(t_tri_uv, tri, b1, b2)
     lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
     base = t_mat_tex[m, BASE] >= 0
+    lit = emits and t_mat_tex[m, EMISSION] >= 0
+    # the material's slots in one loop with one lookup call site, which numba inlines once
+    # (four call sites made the kernels' first compile 3× as long)
+    zero = (0.0, 0.0, 0.0, 0.0)
+    tb = tr = tn = etex = zero
+    for k in range(4):
+        slot = _LAMBERT_SLOTS[k]
+        if t_mat_tex[m, slot] < 0 or (slot == EMISSION and not lit):
+            continue
+        t = slot_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
+                          t_mat_lod, m, np.int64(slot), uv[0], uv[1], lod)
+        tb = t if slot == BASE else tb
+        tr = t if slot == ROUGHNESS else tr
+        tn = t if slot == NORMAL else tn
+        etex = t if slot == EMISSION else etex
     if base:
-        base_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor, t_mat_lod,
-                      m, uv[0], uv[1], lod, alb)
+        base_colour(tb, alb)
     if t_mat_tex[m, ROUGHNESS] >= 0:
-        r_ = scalar_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv,
-                             t_mat_factor, t_mat_lod, m, np.int64(ROUGHNESS), uv[0], uv[1],
-                             lod)
+        r_ = scalar_channel(tr, t_mat_ch[m, ROUGHNESS])
         a = max(r_ * r_, 1e-4)
     if t_mat_tex[m, NORMAL] >= 0:
         n0 = (ng[tri, 0], ng[tri, 1], ng[tri, 2])
         if has_vn:
             n0 = vertex_normal(vn, tri, b1, b2)
-        n = shading_normal(normal_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv,
-                                           t_mat_factor, t_mat_lod, m, uv[0], uv[1], lod,
-                                           t_nscale[m], n0, e1, e2, tri, duv1, duv2), g,
-                           d[0], d[1], d[2])
-    lit = emits and t_mat_tex[m, EMISSION] >= 0
-    etex = (0.0, 0.0, 0.0, 0.0)
-    if lit:
-        etex = slot_texel_of(t_atlas, t_desc, t_rows, t_mat_tex, t_mat_uv, t_mat_factor,
-                             t_mat_lod, m, np.int64(EMISSION), uv[0], uv[1], lod)
+        n = shading_normal(normal_mapped_of(tn, t_nscale[m], n0, e1, e2, tri, duv1, duv2,
+                                            t_mat_uv, m), g, d[0], d[1], d[2])
     return base, a, n, lit, etex
+
+
+#: the texture slots a Lambert hit reads (:func:`lambert_texels`)
+_LAMBERT_SLOTS = (BASE, ROUGHNESS, NORMAL, EMISSION)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
