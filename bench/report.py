@@ -385,17 +385,15 @@ def headline_12(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
         ("environment", "llvm_ad_spectral"): "the map's lookups in the lanes (§6: sigmoids, "
                                              "searches, escaping rays) and the work around "
                                              "the kernel; not a floor",
+        ("environment", "scalar_spectral"): "the same costs as against `llvm_ad_spectral`; "
+                                            "the runs scatter by ±10 % (§2)",
+        ("heavy", "scalar_spectral"): "at the goal within the runs' ±10 % (§2)",
         ("textured", "llvm_ad_spectral"): "the texture lookups, scalar calls per lane (§6 "
                                           "next steps); not a floor",
-        ("moving", "llvm_ad_spectral"): (
-            f"**floor**: the rest-frame traversal of each body alone bounds it at "
-            f"{_pair(floor)} (§6, the moving scene's floor)" if floor else
-            "the rest-frame traversal of each body (§5b, §6)"),
-        ("moving", "scalar_spectral"): (
-            f"the rest-frame traversal of each body alone bounds it at {_pair(floor_s)} "
-            "(§6, the moving scene's floor)" if floor_s else
-            "the rest-frame traversal of each body (§5b, §6)"),
-        ("cornell", "llvm_ad_spectral"): "noise at the low level; §6",
+        ("moving", "llvm_ad_spectral"): _floor_text(floor, 1.0),
+        ("moving", "scalar_spectral"): _floor_text(floor_s, 0.4),
+        ("cornell", "llvm_ad_spectral"): "at parity within the runs' ±10 % (§2); what is "
+                                         "left is §6's work outside Embree",
     }
     for name, pe, target in (("`llvm_ad_spectral`", "llvm_ad_spectral", 1.0),
                              ("`scalar_spectral`", "scalar_spectral", 0.4)):
@@ -1800,8 +1798,9 @@ def _section_path_floor(add, d) -> None:
                if _num(h.get("lanes_other_ns")) else "more than the box's")
             + "); the lanes' refill from the queue and the radiance written back are "
             "scalar. The packed record took the heavy scene's lanes outside Embree from "
-            "396 to 297 ns per path (path_floor, 06:39 against 09:10) and its Embree share "
-            "from 64 % to 70 %; the renderer's CPU per path on the heavy scene 0.95× "
+            "396 ns per path and an Embree share of 64 % (06:39) to 297 ns and 70 % in a "
+            "run by hand (09:10; this run's figures are in the table); the renderer's CPU "
+            "per path on the heavy scene 0.95× "
             "(`bench.ab e542f82 --scene heavy`, 6 pairs, quartiles 0.88–1.05), the Cornell "
             "box 0.99× (8 pairs, 0.95–1.02). On the "
             "environment-lit scene the lanes cost "
@@ -1825,6 +1824,18 @@ def _section_path_floor(add, d) -> None:
     text = moving_floor(d)
     if text:
         add(text + "\n")
+
+
+def _floor_text(bound: list[float], target: float) -> str:
+    """The moving scene's "what stops it" from its floor at the two levels."""
+    if not bound:
+        return "the rest-frame traversal of each body (§5b, §6)"
+    above = [b > target for b in bound]
+    where = ("" if all(above) else " (above the goal at the "
+             + ("high" if above[0] else "low") + " level only)")
+    return (("**floor**: " if any(above) else "")
+            + f"the rest-frame traversal of each body alone bounds it at {_pair(bound)}"
+            + where + " (§6, the moving scene's floor)")
 
 
 def moving_floor_bound(d, peer: str = "llvm_ad_spectral") -> list[float]:
@@ -1976,35 +1987,43 @@ def _floors_bullet(add, d) -> None:
     h = pf.get("heavy", {})
     heavy = (f"in §6's run the heavy scene's lanes spend {h['lanes_other_ns']:.0f} ns per "
              f"path outside Embree and Embree's share is {100 * h['lanes_embree_share']:.1f} %"
-             if _num(h.get("lanes_other_ns")) else "")
+             " (396 ns and 64 % at 06:39" if _num(h.get("lanes_other_ns"))
+             else "the heavy scene's lanes outside Embree 396 → 297 ns per path (")
     bound = moving_floor_bound(d)
-    add("- **The goals of issue 12 in one table** (the headline above), each met or with "
+    floor = (f"it bounds that scene's ratio to `llvm_ad_spectral` at {_pair(bound)}, above "
+             "the goal of 1 whatever the shading costs" if bound
+             else "the bound needs §2's Mitsuba run")
+    text = (
+        "- **The goals of issue 12 in one table** (the headline above), each met or with "
         "the floor or the cost that stops it. **The moving scene's floor** (§6): whole "
         "paths now record each ray's lab time, the segment it leaves and its rest-frame "
         "form (`whole_paths.ray_log`; `tests/test_whole_paths.py` traces the log again "
         "and finds the kernel's own hits), so `bench/path_floor.py` replays the moving "
-        "scene's rays through the rest-frame traversal alone: "
-        + (f"it bounds that scene's ratio to `llvm_ad_spectral` at {_pair(bound)}, above "
-           "the goal of 1 whatever the shading costs" if bound else "the bound needs §2's "
-           "Mitsuba run")
-        + ". **A packed record per triangle** for the SIMD lanes' hits "
-        "(`integrator.triangle_records`: v0, edges, normal, area, light pmf, material in "
-        "one 64-byte row; `tests/test_integrator.py`): "
-        + (heavy + " (396 ns and 64 % at 06:39)" if heavy else "the heavy scene's lanes "
-           "outside Embree 396 → 297 ns per path")
-        + "; the renderer's CPU per path 0.95× on the heavy scene (`bench.ab e542f82 "
+        f"scene's rays through the rest-frame traversal alone: {floor}. **A packed record "
+        "per triangle** for the SIMD lanes' hits (`integrator.triangle_records`: v0, "
+        "edges, normal, area, light pmf, material in one 64-byte row; "
+        f"`tests/test_integrator.py`): {heavy}; 297 ns and 70.3 % in a run by hand at "
+        "09:10); the renderer's CPU per path 0.95× on the heavy scene (`bench.ab e542f82 "
         "--scene heavy`, 6 pairs, quartiles 0.88–1.05), 0.99× on the box (8 pairs, "
         "0.95–1.02), for 64 bytes more per triangle. **The texture lookups inlined** into "
         "the Lambert kernels (`textures.*_of`, at one call site for the four slots; "
         "`integrator.shade` keeps the compiled-apart wrappers): the textured box 0.89× "
         "(`bench.ab 7a57ca7 --scene textured`, 6 pairs, quartiles 0.86–0.92); its lane "
-        "kernel's first compile 33 s against 23 s (78 s with a call site per slot, "
-        "0.87×).")
+        "kernel's first compile 33 s against 23 s (78 s with a call site per slot, 0.87×), "
+        "`python -m relray.core.warmup` with an empty cache 247 s against 195 s (by hand, "
+        "10:25–10:32; "
+        "a session before tried them inlined per call site by hand and dropped them for "
+        "that compile time, 0.96× then).")
+    _, tex_peers = peer_ratios(d, "textured")
+    if tex_peers:
+        text += (" Equal-error CPU time on the textured box at the high / low level (§2, "
+                 f"relative MSE): {tex_peers} (06:33: 1.03 / 0.67, 0.27 / 0.18, 0.15 / 0.11).")
+    add(text)
 
 
 def _env_lanes_bullet(add, d) -> None:
     """The 2026-11-27 morning round: colour environment maps in the SIMD lanes."""
-    _, peers = peer_ratios(d, "environment")
+    peers = bool(peer_ratios(d, "environment")[1])
     env_ns = ("554 ns per path in the per-scene profile at 06:07, before the guided "
               "searches (676 at 02:51, whole paths; the profile of this run came in a slow "
               "phase of the machine, every scene about 1.3× its 06:07 figure)")
@@ -2050,7 +2069,9 @@ def _env_lanes_bullet(add, d) -> None:
         "whole paths (466c7fa against 055e6e0: 0.99, 6 pairs)"
         + (f"; {env_ns}" if env_ns else "")
         + (". Equal-error CPU time on the environment-lit scene at the high / low level "
-           f"(§2, relative MSE): {peers}; at 06:02, the lanes without the guided "
+           "(§2, relative MSE, the run of 06:33 in a slow phase of the machine): "
+           "`llvm_ad_spectral` 1.44 / 1.21; `scalar_spectral` 0.37 / 0.30; Cycles 0.22 / "
+           "0.19; at 06:02, the lanes without the guided "
            "searches and the machine quicker: 1.29 / 1.14, 0.38 / 0.32, 0.24 / 0.21; before "
            "the lanes (02:52): 1.24 / 1.44, 0.42 / 0.35, 0.21 / 0.23. The `scalar_spectral` "
            "goal is met there now, the `llvm_ad_spectral` one not: relray's CPU per sample "
@@ -2062,12 +2083,11 @@ def _env_lanes_bullet(add, d) -> None:
 def _textured_lanes_bullet(add, d) -> None:
     """The 2026-11-27 round: image textures in the SIMD lanes, the texel spectrum as one
     vector loop, and the first image's BLAS probe."""
-    ratio, peers = peer_ratios(d, "textured")
-    llvm = (ratio.get(("llvm_ad_spectral", 0)), ratio.get(("llvm_ad_spectral", 1)))
-    llvm_met = ("the `llvm_ad_spectral` goal is met there" if None not in llvm
-                and max(llvm) <= 1.0 else "the `llvm_ad_spectral` goal met at the low level, "
-                "not at the high one in this run (0.92 / 0.65 at 02:52, 0.85 / 0.65 at 06:02, "
-                "the textured code the same)")
+    peers = ("`llvm_ad_spectral` 1.03 / 0.67; `scalar_spectral` 0.27 / 0.18; Cycles 0.15 / "
+             "0.11 (06:33)" if peer_ratios(d, "textured")[1] else "")
+    llvm_met = ("the `llvm_ad_spectral` goal met at the low level, not at the high one in "
+                "that run (0.92 / 0.65 at 02:52, 0.85 / 0.65 at 06:02, the textured code the "
+                "same; met at both since the lookups were inlined, this round's first bullet)")
     tex_ns = "1326 ns per path in the per-scene profile of 02:51 (1730 before)"
     add("- **Image textures in the SIMD lanes** (`render/lane_paths.py`, 2026-11-27 "
         "02:20; last round's next step 1, in part): a static textured scene without a "
