@@ -320,7 +320,7 @@ def triangle_records(geometry: dict[str, np.ndarray], material_ids: np.ndarray,
     n = len(geometry["area"])
     if n and int(np.max(material_ids)) >= 1 << 24:
         raise ValueError("triangle_records: a material index beyond 2**24")
-    buf = np.empty(n * 16 + 16, np.float32)  # aligned to 64 bytes below
+    buf = np.zeros(n * 16 + 16, np.float32)  # aligned to 64 bytes below; column 15 spare
     start = (-buf.ctypes.data % 64) // 4
     rec = buf[start:start + n * 16].reshape(n, 16)
     for col, key in ((REC_V0, "v0"), (REC_E1, "e1"), (REC_E2, "e2"), (REC_NG, "ng")):
@@ -328,7 +328,6 @@ def triangle_records(geometry: dict[str, np.ndarray], material_ids: np.ndarray,
     rec[:, REC_AREA] = geometry["area"]
     rec[:, REC_PMF] = tri_pmf
     rec[:, REC_MAT] = material_ids
-    rec[:, 15] = 0.0
     return rec
 
 

@@ -440,14 +440,9 @@ def spectral_modes_with_table(mode: str) -> bool:
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def base_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out):
-    """:func:`base_texel_of`, compiled apart (for ``integrator.shade``)."""
-    base_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out)
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def base_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, out):
     """Material m's base-colour texel at (u, v) (level of detail ``lod``), each channel
-    clamped to [0, 1], into ``out[:3]`` (linear Rec.709)."""
+    clamped to [0, 1], into ``out[:3]`` (linear Rec.709); compiled apart, for
+    ``integrator.shade``."""
     base_colour(slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
                               np.int64(BASE), u, v, lod), out)
 
@@ -463,19 +458,10 @@ def base_colour(t, out):
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def scalar_texel(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod, m, slot, u,
                  v, lod):
-    """:func:`scalar_texel_of`, compiled apart (for ``integrator.shade``)."""
-    return scalar_texel_of(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod,
-                           m, slot, u, v, lod)
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def scalar_texel_of(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod, m, slot,
-                    u, v, lod):
     """The channel a scalar slot (``ROUGHNESS``, ``METALLIC``) of material m reads at
-    (u, v), clamped to [0, 1]."""
-    t = slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot, u, v,
-                      lod)
-    return scalar_channel(t, mat_ch[m, slot])
+    (u, v), clamped to [0, 1]; compiled apart, for ``integrator.shade``."""
+    return scalar_channel(slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor,
+                                        mat_lod, m, slot, u, v, lod), mat_ch[m, slot])
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -487,17 +473,10 @@ def scalar_channel(t, c):
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def normal_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod, scale,
                  n0, e1, e2, tri, duv1, duv2):
-    """:func:`normal_texel_of`, compiled apart (for ``integrator.shade``)."""
-    return normal_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v,
-                           lod, scale, n0, e1, e2, tri, duv1, duv2)
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def normal_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v, lod,
-                    scale, n0, e1, e2, tri, duv1, duv2):
     """The (unnormalised) normal of material m's normal map at (u, v) on triangle ``tri``
     with interpolated or geometric front normal ``n0``: :func:`normal_mapped` of its
-    texel (``scale``: glTF normalTexture.scale)."""
+    texel (``scale``: glTF normalTexture.scale); compiled apart, for
+    ``integrator.shade``."""
     t = slot_texel_of(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m,
                       np.int64(NORMAL), u, v, lod)
     return normal_mapped_of(t, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m)
