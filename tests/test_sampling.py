@@ -158,12 +158,35 @@ def test_pixel_words_are_distinct_within_a_frame():
     assert np.all(keys & np.uint64(0xFFFFFFFF) == 0)
 
 
-def test_sobol1_bits_match_the_direction_numbers():
-    """The byte tables give Sobol's dimension 1 in index (not Gray-code) order:
-    x_i = xor of v_k over the set bits k of i, v = 1/2, 3/4, 5/8, ..."""
+def sobol1_by_direction_numbers(i: int) -> int:
+    """Sobol's dimension 1 of i as a 32-bit binary fraction, from its definition: the
+    xor of v_k over the set bits k of i, v_0 = 2^31, v_k = v_(k-1) xor (v_(k-1) >> 1)."""
+    v, x = 1 << 31, 0
+    for k in range(32):
+        if i >> k & 1:
+            x ^= v
+        v ^= v >> 1
+    return x
+
+
+def test_sobol1_matches_its_direction_numbers():
+    """Sobol's dimension 1 in index (not Gray-code) order, x = 1/2, 3/4, 1/4, 5/8 ...:
+    the superset transform (bit-reversed) against the xor of the direction numbers, at
+    the first indices, at every single bit and at random 32-bit indices (the high bits
+    of a 64-bit word are ignored)."""
     ref = [0.0, 0.5, 0.75, 0.25, 0.625, 0.125, 0.375, 0.875]
-    got = [float(sampling.sobol1_bits(np.uint64(i))) / 2**32 for i in range(8)]
-    assert got == ref
+    first = [sampling.reverse32(sampling.sobol1_reversed(np.uint64(i))) / 2**32
+             for i in range(8)]
+    assert first == ref
+    rng = np.random.default_rng(5)
+    idx = [1 << k for k in range(32)] + [0xFFFFFFFF] + list(
+        rng.integers(0, 2**32, 2000, dtype=np.uint64))
+    for i in idx:
+        got = int(sampling.reverse32(sampling.sobol1_reversed(np.uint64(i) | _HIGH)))
+        assert got == sobol1_by_direction_numbers(int(i)), i
+
+
+_HIGH = np.uint64(0xDEADBEEF) << np.uint64(32)
 
 
 @njit(cache=True)

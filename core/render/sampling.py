@@ -167,35 +167,24 @@ def laine_karras(x, seed):
     return x
 
 
-def _sobol1_byte_tables() -> np.ndarray:
-    """T[b, x] = the second Sobol dimension's contribution of byte b of the index having
-    value x; direction numbers v_0 = 2^31, v_k = v_(k-1) xor (v_(k-1) >> 1)
-    (primitive polynomial x + 1)."""
-    v = [1 << 31]
-    for _ in range(31):
-        v.append(v[-1] ^ (v[-1] >> 1))
-    t = np.zeros((4, 256), np.uint64)
-    for b in range(4):
-        for x in range(256):
-            y = 0
-            for k in range(8):
-                if x >> k & 1:
-                    y ^= v[8 * b + k]
-            t[b, x] = y
-    return t
-
-
-_SOBOL1 = _sobol1_byte_tables()
-_BYTE = np.uint64(0xFF)
-_S8 = np.uint64(8)
-_S24 = np.uint64(24)
-
-
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
-def sobol1_bits(i):
-    """The second Sobol dimension of a 32-bit index i as a 32-bit binary fraction."""
-    return (_SOBOL1[0, i & _BYTE] ^ _SOBOL1[1, (i >> _S8) & _BYTE]
-            ^ _SOBOL1[2, (i >> _S16) & _BYTE] ^ _SOBOL1[3, (i >> _S24) & _BYTE])
+def sobol1_reversed(i):
+    """Sobol's dimension 1 of a 32-bit index i, bit-reversed: bit j of the result is the
+    fraction's digit of weight 2^-(j+1).
+
+    Its direction numbers (primitive polynomial x + 1: v_0 = 1/2, v_k = v_(k-1) xor
+    v_(k-1)/2) are the rows of Pascal's triangle mod 2: v_k has the digit of weight
+    2^-(j+1) iff C(k, j) is odd, that is (Lucas) iff the bits of j are a subset of those
+    of k. So digit j of x_i = xor of v_k over the set bits k of i is the xor of i's bits
+    k ⊇ j: the superset transform over GF(2), five shift-and-xor steps (one per bit of
+    j), no table. In the SIMD lanes this replaced a byte table's four gathers per point
+    (each a 64-bit gather in every lane)."""
+    i = i & _MASK32
+    i ^= (i >> _U1) & _R1
+    i ^= (i >> _U2) & _R2
+    i ^= (i >> _U4) & _R4
+    i ^= (i >> _U8) & _R8
+    return i ^ (i >> _S16)
 
 
 @njit(cache=True, nogil=True, inline="always", error_model="numpy")
@@ -214,7 +203,7 @@ def sobol2(key, dim):
     i = reverse32(laine_karras(reverse32(key & _MASK32), h_shuffle))
     # x: Sobol_0(i) = reverse(i); its Owen scramble is reverse(LK(reverse(reverse(i))))
     x = reverse32(laine_karras(i, h_x))
-    y = reverse32(laine_karras(reverse32(sobol1_bits(i)), mix64(h_x) & _MASK32))
+    y = reverse32(laine_karras(sobol1_reversed(i), mix64(h_x) & _MASK32))
     return np.float64(x) * _INV32, np.float64(y) * _INV32
 
 
