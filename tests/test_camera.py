@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from relray.core.physics import relativity
-from relray.core.render.camera import PinholeCamera
+from relray.core.render.camera import PinholeCamera, camera_ray
 from relray.core.render.sampling import path_keys, sobol2_dims
 from relray.core.scene.job import look_at_rotation
 
@@ -96,3 +96,31 @@ def test_pixel_solid_angle_at_the_centre():
     cam = camera(width=100, height=80, fov=30.0)
     assert cam.pixel_solid_angle(np.array([50.0]), np.array([40.0]))[0] == \
         pytest.approx((2 * cam.tan_half_fov / 80) ** 2, rel=1e-14)
+
+
+@pytest.mark.parametrize("n", [1, 15, 16, 17, 53])
+def test_primary_rays_in_blocks_are_each_paths_own_ray(n):
+    """The kernel computes its rays in blocks of RAY_BLOCK paths in stack memory and
+    copies them out: every path, the last partial block's too, gets exactly the ray that
+    camera_ray gives it alone (moving camera outside the bounding sphere: aberration,
+    D and the skipped distance all in play), and an ``out`` buffer longer than the
+    wavefront keeps its rows beyond N."""
+    cam = camera()
+    beta, x0, radius = np.array([0.2, 0.5, 0.3]), np.array([3.0, -40.0, 7.0]), 30.0
+    pix = (620 + np.arange(n, dtype=np.int64) * 97) % (cam.width * cam.height)  # centre first
+    keys = path_keys(4, 1, pix, np.arange(n, dtype=np.int64) // 3)
+    out = (np.full((n + 5, 3), 7.0, np.float32), np.full((n + 5, 3), 7.0, np.float32),
+           np.full(n + 5, 7.0), np.full(n + 5, 7.0))
+    o, d, D, skipped = cam.primary_rays(beta, keys, pix, x0, radius, out)
+    hx, hy, hz, b, inv_g = relativity.beta_kernel_args(beta)
+    c = x0 @ x0 - radius * radius
+    for i in range(n):
+        dx, dy, dz, f, t_in = camera_ray(cam.rotation, *cam.window(), cam.width, cam.height,
+                                         hx, hy, hz, b, inv_g, keys[i], pix[i], x0, c,
+                                         radius * radius)
+        assert f != 1.0
+        assert np.array_equal(d[i], np.float32([dx, dy, dz]))
+        assert np.array_equal(o[i], np.float32(x0 + t_in * np.array([dx, dy, dz])))
+        assert D[i] == f and skipped[i] == t_in
+    assert np.any(skipped > 0.0) and (n < 15 or np.any(skipped == 0.0))  # hits and misses
+    assert all(np.all(a[n:] == 7.0) for a in out) and o.base is out[0]

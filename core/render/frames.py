@@ -62,7 +62,9 @@ WAVEFRONT = 1 << 16
 CHUNK_BUFFERS = (("pix", 0, np.int64), ("samp", 0, np.int64), ("sensor", 3, np.float64),
                  ("alpha", 0, np.float64), ("lam_weight", 4, np.float64),
                  ("lam", 4, np.float64), ("pdf", 4, np.float64), ("lamu", 4, np.float32),
-                 ("w_d", 0, np.float64))
+                 ("w_d", 0, np.float64), ("keys", 0, np.uint64), ("o", 3, np.float32),
+                 ("d", 3, np.float32), ("D", 0, np.float64), ("skipped", 0, np.float64),
+                 ("u", 0, np.float64))
 ESCAPED_DEPTH = 1e10
 
 
@@ -369,27 +371,28 @@ class FrameRenderer:
         in accelerator coordinates) with the camera's Doppler factors D and skipped
         distances, and hero lanes (λ, pdf, table coordinates shifted by D, D⁵ weight; the
         rgb mode: columns 0..2 of the RGB tables, w_d = 1), what the integrators start
-        from. ``out``: (λ, pdf, table coordinates, w_d) arrays to fill (else new)."""
+        from. ``out``: arrays to fill (else new): (λ, pdf, table coordinates, w_d, keys,
+        o, d, D, skipped, hero offsets), as :data:`CHUNK_BUFFERS` names them."""
         s = self.settings
         n = len(pix)
-        keys = path_keys(s.seed, frame, pix, samp)
+        if out is None:
+            out = (np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4), np.float32),
+                   np.empty(n), None, None, None, None, None, None)
+        keys = path_keys(s.seed, frame, pix, samp, out[4])
         camera = self.camera if event.rotation is None else \
             replace(self.camera, rotation=event.rotation)
         o, d, D, skipped = camera.primary_rays(
             event.beta, keys, pix, np.asarray(event.x, np.float64) - self.prep.origin,
-            self.prep.radius)
-        if out is None:
-            out = (np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4), np.float32),
-                   np.empty(n))
+            self.prep.radius, None if out[5] is None else out[5:9])
         if self.rgb_mode:  # columns 0..2 of the RGB tables; w_d = 1 (no searchlight)
-            lam, pdf, lamu, w_d = out
+            lam, pdf, lamu, w_d = (a[:n] for a in out[:4])
             lam[:], pdf[:], lamu[:], w_d[:] = 0.0, 1.0, (0.0, 1.0, 2.0, 0.0), 1.0
             d_min, d_max = (float(D.min()), float(D.max())) if n else (math.inf, 0.0)
             return CameraPaths(keys, o, d, D, skipped, lam, pdf, lamu, w_d, d_min, d_max, 3)
-        u = progressive_offsets(s.seed, frame, pix, samp)
+        u = progressive_offsets(s.seed, frame, pix, samp, out[9])
         # hero λ, pdf, table coordinates (Doppler-shifted), D⁵ and D's range: one pass
         lam, pdf, lamu, w_d, d_min, d_max = self.sampler.lanes(
-            u, D, doppler=self.doppler, searchlight=self.searchlight, out=out)
+            u, D, doppler=self.doppler, searchlight=self.searchlight, out=out[:4])
         return CameraPaths(keys, o, d, D, skipped, lam, pdf, lamu, w_d, d_min, d_max, 4)
 
     def _trace_chunk(self, event, frame, pixels, s0, s1, film, lock, stats):
@@ -406,7 +409,8 @@ class FrameRenderer:
         pix.reshape(len(pixels), n_s)[:] = pixels[:, None]
         samp.reshape(len(pixels), n_s)[:] = np.arange(s0, s1, dtype=np.int64)
         cp = self.camera_paths(event, frame, pix, samp,
-                               (b["lam"], b["pdf"], b["lamu"], b["w_d"]))
+                               tuple(b[k] for k in ("lam", "pdf", "lamu", "w_d", "keys", "o",
+                                                    "d", "D", "skipped", "u")))
         keys, o_local, d_lab, D, skipped = cp.keys, cp.o, cp.d, cp.D, cp.skipped
         lam, pdf, lamu, w_d, nlanes = cp.lam, cp.pdf, cp.lamu, cp.w_d, cp.nlanes
         spread = 0.0

@@ -114,9 +114,12 @@ def path_key(seed, frame, pixel, sample):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def path_keys(seed, frame, pixels, samples):
-    """Vector form of :func:`path_key` for a wavefront."""
-    out = np.empty(len(pixels), np.uint64)
+def path_keys(seed, frame, pixels, samples, out=None):
+    """Vector form of :func:`path_key` for a wavefront (into ``out``'s first N rows if
+    given: a caller's buffer reused across wavefronts)."""
+    if out is None:
+        out = np.empty(len(pixels), np.uint64)
+    out = out[:len(pixels)]
     for i in range(len(pixels)):
         out[i] = path_key(seed, frame, pixels[i], samples[i])
     return out
@@ -340,14 +343,17 @@ def radical_inverse2(i):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def progressive_offsets(seed, frame, pixels, samples):
+def progressive_offsets(seed, frame, pixels, samples, out=None):
     """Per-sample offsets u = frac(vdc(sample) + r_pixel) for the hero wavelengths.
 
     Any prefix of a pixel's samples is well stratified (van der Corput), and the random
     per-pixel rotation r_pixel (Cranley–Patterson) keeps each u uniform, so a pixel that
-    stops early (adaptive sampling) or renders a sample batch stays unbiased.
+    stops early (adaptive sampling) or renders a sample batch stays unbiased. ``out``:
+    a buffer of at least N rows to fill (its first N are returned).
     """
-    out = np.empty(len(pixels), np.float64)
+    if out is None:
+        out = np.empty(len(pixels), np.float64)
+    out = out[:len(pixels)]
     for i in range(len(pixels)):
         r = rand(path_key(seed, frame, pixels[i], np.uint64(0xFFFFFFFF)), DIM_WAVELENGTH)
         v = radical_inverse2(samples[i]) + r
