@@ -1454,7 +1454,9 @@ FIRST_CLI_NOTES = (
     "cached kernel, numba's typing and lowering registries (0.45-0.57 s, 0.14 s of it "
     "`scipy.linalg`, imported by numba's BLAS check); relray's own share is the job "
     "schema (pydantic, 0.18 s), its modules, a 0.19 s render and 0.10 s of writing. "
-    "The 1 s goal is not reachable while the command line loads numba's JIT. A second "
+    "So the 1 s goal has little margin while the command line loads numba's JIT: it "
+    "was missed at 1.07–1.17 s in the runs of 2026-11-27 03:02 and 10:02 and met at "
+    "0.87 s (imports 0.40 s) in the quicker phase of 13:05. A second "
     "cProfile (2026-11-26 11:52, load 0.6, 2.1 s in all, 0.18 s of it compiling "
     "relray's modules for want of bytecode): importing numba 0.62 s, its registries at "
     "the first cached kernel 0.43 s and `scipy.linalg` 0.20 s, the job schema 0.21 s, "
@@ -1978,6 +1980,55 @@ def peer_ratios(d, scene: str) -> tuple[dict, str]:
     return ratio, text
 
 
+def _lane_numbers_bullet(add, d) -> None:
+    """The 2026-11-27 afternoon round: the lanes' numbers, indices and prefetches, the
+    camera rays in blocks."""
+    pf = {r["scene"]: r for r in d["path_floor"]}
+    shares = "; ".join(
+        f"{name} {pf[k]['lanes_other_ns']:.0f} ns outside Embree, Embree's share "
+        f"{100 * pf[k]['lanes_embree_share']:.1f} %"
+        for k, name in (("cornell", "the box"), ("heavy", "the heavy scene"))
+        if _num(pf.get(k, {}).get("lanes_other_ns")))
+    add("- **The lanes' work outside Embree** (`render/lane_paths.py`, `render/sampling.py`, "
+        "`render/prefetch.py`, 2026-11-27 12:10–12:45; found by taking each part out of "
+        "the Cornell lane kernel in turn, `path_floor --scene cornell`): (a) Sobol's "
+        "dimension 1 came from a byte table, four 64-bit gathers per point in every lane "
+        "(about 17 ns per path); it is now the superset transform its direction numbers "
+        "are (Pascal's triangle mod 2: digit j of x_i is the xor of i's bits k ⊇ j, five "
+        "shift-and-xor steps, `sampling.sobol1_reversed`; the same numbers bit for bit, "
+        "`tests/test_sampling.py` checks it against the direction numbers at every bit "
+        "and at 2000 random indices); (b) numba turns a negative signed index into one "
+        "from the end, a sign test, a mask and an add per gather in vector code; the "
+        "lanes' table rows and columns, triangle and light indices now index as "
+        "unsigned (`lane_paths.lane_lerp`; about 14 ns); (c) the hit triangles' records "
+        "are prefetched (`llvm.prefetch` from numba, `prefetch.prefetch_row`) right "
+        "after `rtcIntersect16` returns, and the bounce's numbers are drawn before the "
+        "records are gathered (`lane_paths.bounce_numbers`), so the heavy scene's cache "
+        "misses overlap the hashing (about 250 → 220 ns outside Embree by hand; the "
+        "prefetch alone or the new order alone gained nothing). By hand at 12:40 the "
+        "box's lanes spend 190 ns per path outside Embree (223 before), Embree's share "
+        f"62 %; in §6's run: {shares}. "
+        "**The camera rays in blocks** (`render/camera.py`): `_primary_rays` computes 16 "
+        "rays at a time into the kernel's stack memory, where LLVM vectorises the loop "
+        "(written straight into the output arrays it stayed scalar), then copies them "
+        "out: 25 → 13 ns per path at rest, 54 → 16 ns for a moving camera outside the "
+        "bounding sphere (65 536 rays, bit-identical, `tests/test_camera.py` checks every "
+        "path of a partial last block against `camera.camera_ray` alone); the keys, rays "
+        "and hero offsets go into the chunk's kept buffers (fresh multi-MB arrays cost a "
+        "page fault per 4 KiB on every wavefront). The renderer's CPU per path against "
+        "the code before this round (`python -m relray.bench.ab 8097bb5 --scene S`, 6 "
+        "alternated pairs, 128², 16 spp, 1 thread, 12:59–13:01): Cornell **0.93×** "
+        "(quartiles 0.92–0.95; 664 → 621 ns), heavy **0.91×** (0.88–0.92; 1027 → 923 ns); "
+        "the camera stage's part alone (against f9e57e1) 0.97× (0.94–1.01). Tried and "
+        "dropped: the lanes' reflectance table in float32 (the mixed precision cost more, "
+        "223 ns); the emission's gathers only where a lane sees an emitter (masked gathers: "
+        "no gain); Embree's high build quality (no change on either scene); the hero "
+        "wavelengths' inverse CDF in blocks of 16 (37 against 40 ns per path: its guided "
+        "search and the per-path Doppler work stay scalar, and the stack memory it needs "
+        "lives in the render layer, below which the sampler sits); the sensor values in "
+        "blocks (slower: 20 against 13 ns).")
+
+
 def _floors_bullet(add, d) -> None:
     """The 2026-11-27 late-morning round: the goals table, the moving scene's floor, the
     packed triangle record, the inlined texture lookups."""
@@ -2150,6 +2201,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _lane_numbers_bullet(add, d)
     _floors_bullet(add, d)
     _env_lanes_bullet(add, d)
     _textured_lanes_bullet(add, d)
@@ -2452,6 +2504,11 @@ def _section_recommendations(add, d) -> None:
         "`vgf2p8affineqb` (10 in the Cornell lane kernel); the kernel written with "
         "`llvm.bitreverse.i32` compiled to the same instructions (4515, the same mix), "
         "and `bench.ab HEAD --scene cornell` measured 1.03 (quartiles 1.01–1.09: noise).")
+    add("8. **The hero wavelengths' inverse CDF** (the camera stage, every scene: "
+        f"{_ns(d, 'hero:'):.0f} ns per path in §6's profile): its guided search and the "
+        "per-path Doppler shift are scalar; in blocks of 16 with the search as selects "
+        "(at most 6 steps in the 8192-entry guide, 96 % none) it could be vector code, "
+        "with the stack memory moved below the physics layer.")
     add("")
 
 
