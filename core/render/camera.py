@@ -167,6 +167,7 @@ def camera_ray(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, hz, 
 
 #: paths per block of :func:`_primary_rays` (its stack arrays' width: a literal there)
 RAY_BLOCK = 16
+assert RAY_BLOCK == 16  # _primary_rays' stack_array(5, 16, …) holds one block
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)

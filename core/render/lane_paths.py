@@ -464,7 +464,7 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, gene
     (:func:`pick_texels`), its pdf, and the texel's radiance at its λ (``evals``' first
     four rows, :func:`texel_values`)."""
     v0, e1, e2, ng, area, tri_mat = geo[:6]
-    (_, emit, _, one_sided, _, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
+    (_, emit, _, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
      l_cdf) = mats[:-2]
     _, _, depth, ray, thr, li, lf, _, prev_pdf = lanes
     pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive = bounce
@@ -572,7 +572,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
-                   l_cdf, tri_pmf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_mguide,
+                   l_cdf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_mguide,
                    env_cguide, env_pmf, env_rot, env_row, eps_base, tex, tri_rec, keys, o, d,
                    lamu, spread, nlanes, max_depth, sky_seen, L, first_t,
                    log):  # pragma: no cover - compiled
@@ -651,7 +651,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                 rho[j, lane], nee[j, lane] = 0.0, 0.0
                 elam[j, lane], ebase[j, lane] = 0.0, 0.0
         geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn, tri_rec)
-        mats = (refl, emit, emit_row, one_sided, tri_pmf, l_kind, l_prim, l_pos, l_dir, l_row,
+        mats = (refl, emit, emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row,
                 l_scale, l_spot, l_cdf, sky_pmf, sky_row)
         lanes = (path, key, depth, ray, thr, li, lf, acc, prev_pdf)
         bounce = (pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive)
@@ -802,7 +802,7 @@ def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
     return run(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
                sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind,
                sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
-               sc.tri_pmf, sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond,
+               sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond,
                sc.env_mguide, sc.env_cguide, sc.env_pmf, float(sc.env_rot), int(sc.env_row),
                float(sc.eps), sc.tex, sc.tri_rec, keys, o, d, lamu,
                whole_paths.cone_spread(sc, spread, len(keys)), nlanes, max_depth, sky_seen, L,
