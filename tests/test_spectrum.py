@@ -448,8 +448,53 @@ def test_sampler_sample_exact_pdf_and_histogram(sampler):
     assert np.all((lam_e >= 360.0) & (lam_e < 830.0))
     np.testing.assert_array_equal(pdf_e, sampler.pdf_at(lam_e))
     counts = np.histogram(lam, bins=sampler.edges_nm)[0]
-    expected = n * sampler.pdf  # 1 nm bins
+    expected = n * table_mass(sampler, sampler.edges_nm)  # 1 nm bins
     assert np.all(np.abs(counts - expected) < 5.0 * np.sqrt(expected))
+    # … and on a finer histogram, where a bin sees the cells' own steps
+    fine = np.linspace(360.0, 830.0, 4701)
+    counts = np.histogram(lam, bins=fine)[0]
+    expected = n * table_mass(sampler, fine)
+    assert np.all(np.abs(counts - expected) < 5.0 * np.sqrt(expected) + 1.0)
+
+
+def table_mass(sampler, edges):
+    """∫ pdf_at over each interval of ``edges``: the table's CDF is linear on every cell
+    (u = (g + (λ - λ_g)/(λ_(g+1) - λ_g))/G), so np.interp is exact."""
+    nodes = np.arange(sampler.inv_nm.shape[0]) / sp.INVERSE_CELLS
+    return np.diff(np.interp(edges, sampler.inv_nm, nodes))
+
+
+@pytest.mark.parametrize("kind", ["cie1931", "seed-gaussian", "bands-only", "ir-bands"])
+def test_inverse_table_follows_the_bins(kind):
+    """The sampled pdf is the bins' where a cell lies inside one bin, and between the
+    covered bins' values where it straddles edges; it integrates to 1 over [λ_0, λ_G],
+    whose ends are those of the bins with mass."""
+    s = {"cie1931": lambda: sp.make_sampler("cie1931"),
+         "seed-gaussian": lambda: sp.make_sampler("seed-gaussian"),
+         "bands-only": lambda: sp.make_sampler("cie1931", bands=(380.0, 780.0, 5.0),
+                                               uniform_mix=1.0),
+         "ir-bands": lambda: sp.make_sampler("cie1931", bands=(1000.0, 5000.0, 100.0))}[kind]()
+    inv, cp = s.inv_nm, s.cell_pdf
+    assert inv.shape == (sp.INVERSE_CELLS + 1,) and np.all(np.diff(inv) > 0.0)
+    assert np.sum(cp * np.diff(inv)) == pytest.approx(1.0, abs=1e-12)
+    mass = np.flatnonzero(s.pdf > 0.0)
+    assert inv[0] == s.edges_nm[mass[0]] and inv[-1] == s.edges_nm[mass[-1] + 1]
+    b_lo = np.searchsorted(s.edges_nm, inv[:-1], side="right") - 1
+    b_hi = np.searchsorted(s.edges_nm, inv[1:], side="left") - 1
+    one = b_lo == b_hi
+    assert one.mean() > 0.5
+    np.testing.assert_allclose(cp[one], s.pdf[b_lo[one]], rtol=1e-9)
+    gaps = 0
+    for g in np.flatnonzero(~one):
+        covered = s.pdf[b_lo[g]:b_hi[g] + 1]
+        # a cell across a gap of empty bins (IR bands away from the sensor): one per gap
+        gaps += covered.min() == 0.0
+        low = covered.min() * (1 - 1e-9) if covered.min() > 0.0 else 1e-300
+        assert low <= cp[g] <= covered.max() * (1 + 1e-9)
+    assert gaps == (1 if kind == "ir-bands" else 0)
+    # the target's mass per bin is the table's, up to the cells across its edges
+    assert np.max(np.abs(table_mass(s, s.edges_nm) - s.pdf * np.diff(s.edges_nm))) \
+        < 1.0 / sp.INVERSE_CELLS
 
 
 def test_hero_lanes_marginal(sampler):
@@ -457,7 +502,7 @@ def test_hero_lanes_marginal(sampler):
     lam, pdf = sampler.hero(np.random.default_rng(4).random(n))
     assert lam.shape == (n, 4) and pdf.shape == (n, 4)
     np.testing.assert_array_equal(pdf, sampler.pdf_at(lam))
-    expected = n * sampler.pdf
+    expected = n * table_mass(sampler, sampler.edges_nm)
     for j in range(4):
         counts = np.histogram(lam[:, j], bins=sampler.edges_nm)[0]
         assert np.all(np.abs(counts - expected) < 5.0 * np.sqrt(expected))
