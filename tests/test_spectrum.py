@@ -506,10 +506,13 @@ def test_hero_lanes_marginal(sampler):
     for j in range(4):
         counts = np.histogram(lam[:, j], bins=sampler.edges_nm)[0]
         assert np.all(np.abs(counts - expected) < 5.0 * np.sqrt(expected))
-    # Lanes are the stratified rotations u + j/4.
-    u = np.array([0.1, 0.9])
-    lam2, _ = sampler.hero(u)
-    np.testing.assert_array_equal(lam2[:, 1], sampler.sample(np.mod(u + 0.25, 1.0))[0])
+    # Lanes are the stratified rotations u + j/4, each sample()'s λ (to the one ulp of a
+    # fused multiply-add) in sample()'s cell, with its pdf
+    u = np.random.default_rng(7).random(100_000)
+    lam2, pdf2 = sampler.hero(u)
+    lam_s, pdf_s = sampler.sample(np.mod(u + 0.25, 1.0))
+    assert np.all(np.abs(lam2[:, 1] - lam_s) <= np.spacing(lam_s))
+    np.testing.assert_array_equal(pdf2[:, 1], pdf_s)
 
 
 def test_sampler_with_bands():
