@@ -271,3 +271,24 @@ def test_the_renderer_takes_the_lanes_and_its_image_is_that_of_whole_paths(tmp_p
     ref = fr.render(ev, 1)[0].resolve(fr.to_rgb)
     np.testing.assert_allclose(img.rgba, ref.rgba, rtol=1e-3, atol=1e-4 * ref.rgba.max())
     assert distances_differing(img.aovs["depth"], ref.aovs["depth"]) <= 0.005
+
+
+@pytest.mark.parametrize("n_cdf", [2, 3, 17, lane_paths.LINEAR_LIGHTS,
+                                   lane_paths.LINEAR_LIGHTS + 1, 300])
+def test_pick_lights_counts_the_cdf_entries_at_or_below_u(n_cdf):
+    """pick_lights = searchsorted(cdf, u, "right") in every lane, by the count (short
+    CDFs) and by the bisection (long ones): u at entries, between them, on empty steps
+    (repeated entries: lights of no power), 0 and just below 1."""
+    rng = np.random.default_rng(n_cdf)
+    steps = rng.random(n_cdf - 1) * (rng.random(n_cdf - 1) > 0.3)
+    steps[0] = max(steps[0], 0.1)
+    cdf = np.concatenate([[0.0], np.cumsum(steps)])
+    cdf /= cdf[-1]
+    W = lane_paths.W
+    for _ in range(20):
+        ua = np.zeros((2, W))
+        ua[0] = np.where(rng.random(W) < 0.5, rng.choice(cdf, W), rng.random(W))
+        ua[0, :2] = 0.0, np.nextafter(1.0, 0.0)
+        pos = np.full(W, 99, np.int64)  # (pick_lights starts the count itself)
+        lane_paths.pick_lights(cdf, ua, pos)
+        np.testing.assert_array_equal(pos, np.searchsorted(cdf, ua[0], side="right"))
