@@ -65,6 +65,8 @@ CHUNK_BUFFERS = (("pix", 0, np.int64), ("samp", 0, np.int64), ("sensor", 3, np.f
                  ("w_d", 0, np.float64), ("keys", 0, np.uint64), ("o", 3, np.float32),
                  ("d", 3, np.float32), ("D", 0, np.float64), ("skipped", 0, np.float64),
                  ("u", 0, np.float64))
+#: Those of :meth:`FrameRenderer.camera_paths`' ``out``, in its order.
+CAMERA_BUFFERS = ("lam", "pdf", "lamu", "w_d", "keys", "o", "d", "D", "skipped", "u")
 ESCAPED_DEPTH = 1e10
 
 
@@ -372,18 +374,19 @@ class FrameRenderer:
         distances, and hero lanes (λ, pdf, table coordinates shifted by D, D⁵ weight; the
         rgb mode: columns 0..2 of the RGB tables, w_d = 1), what the integrators start
         from. ``out``: arrays to fill (else new): (λ, pdf, table coordinates, w_d, keys,
-        o, d, D, skipped, hero offsets), as :data:`CHUNK_BUFFERS` names them."""
+        o, d, D, skipped, hero offsets), as :data:`CHUNK_BUFFERS` names them
+        (:data:`CAMERA_BUFFERS`)."""
         s = self.settings
         n = len(pix)
         if out is None:
-            out = (np.empty((n, 4)), np.empty((n, 4)), np.empty((n, 4), np.float32),
-                   np.empty(n), None, None, None, None, None, None)
+            fresh = wavefront_buffers(n, None, CHUNK_BUFFERS)
+            out = tuple(fresh[k] for k in CAMERA_BUFFERS)
         keys = path_keys(s.seed, frame, pix, samp, out[4])
         camera = self.camera if event.rotation is None else \
             replace(self.camera, rotation=event.rotation)
         o, d, D, skipped = camera.primary_rays(
             event.beta, keys, pix, np.asarray(event.x, np.float64) - self.prep.origin,
-            self.prep.radius, None if out[5] is None else out[5:9])
+            self.prep.radius, out[5:9])
         if self.rgb_mode:  # columns 0..2 of the RGB tables; w_d = 1 (no searchlight)
             lam, pdf, lamu, w_d = (a[:n] for a in out[:4])
             lam[:], pdf[:], lamu[:], w_d[:] = 0.0, 1.0, (0.0, 1.0, 2.0, 0.0), 1.0
@@ -408,9 +411,7 @@ class FrameRenderer:
         pix, samp = b["pix"], b["samp"]
         pix.reshape(len(pixels), n_s)[:] = pixels[:, None]
         samp.reshape(len(pixels), n_s)[:] = np.arange(s0, s1, dtype=np.int64)
-        cp = self.camera_paths(event, frame, pix, samp,
-                               tuple(b[k] for k in ("lam", "pdf", "lamu", "w_d", "keys", "o",
-                                                    "d", "D", "skipped", "u")))
+        cp = self.camera_paths(event, frame, pix, samp, tuple(b[k] for k in CAMERA_BUFFERS))
         keys, o_local, d_lab, D, skipped = cp.keys, cp.o, cp.d, cp.D, cp.skipped
         lam, pdf, lamu, w_d, nlanes = cp.lam, cp.pdf, cp.lamu, cp.w_d, cp.nlanes
         spread = 0.0
