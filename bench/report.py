@@ -362,9 +362,9 @@ def headline_12(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
         rows.append({"goal": "equal-error CPU time ÷ Cycles, Cornell box (rel. MSE, high / "
                              "low level, §2)", "target": "≤ 0.25", "measured": _pair(vals),
                      "met": all(v <= 0.25 for v in vals),
-                     "stops": "the lanes' work outside Embree, and around the kernel the "
-                              "hero wavelengths' scalar inverse CDF and the film (§6's "
-                              "per-scene profile); not a floor"})
+                     "stops": "the lanes' work outside Embree (§6: the hits, the light "
+                              "samples and continuations, the refill) and around the "
+                              "kernel the film; not a floor"})
     peer: dict[tuple[str, str], list[float]] = {}
     for scene in ("heavy", "environment", "textured", "moving"):
         for (pe, _level), v in sorted(peer_ratios(d, scene)[0].items()):
@@ -1990,6 +1990,56 @@ def peer_ratios(d, scene: str) -> tuple[dict, str]:
     return ratio, text
 
 
+def _hero_table_bullet(add, d) -> None:
+    """The 2026-11-27 evening round: the hero wavelengths from a table, the light pick
+    as a count, and a cycle-counter profile of the lane kernel."""
+    pf = {r["scene"]: r for r in d["path_floor"]}
+    c = pf.get("cornell", {})
+    box = (f"in §6's run the box's lanes spend {c['lanes_other_ns']:.0f} ns per path "
+           f"outside Embree, Embree's share {100 * c['lanes_embree_share']:.1f} %"
+           if _num(c.get("lanes_other_ns")) else "")
+    add("- **The hero wavelengths from an inverse-CDF table** (`physics/spectrum.py`, "
+        "2026-11-27 15:00–15:40; last round's next step 8): `WavelengthSampler` now "
+        "tabulates the bins' inverse CDF at u = g/8192 (`inv_nm`), and u in cell g maps "
+        "linearly to λ in [λ_g, λ_(g+1)): two gathers and no search, where the guided "
+        "search walked up to six dependent steps. The sampled pdf is the cell's, "
+        "(1/G)/(λ_(g+1) − λ_g) (`pdf_at`, exact for every λ drawn): the bins' pdf "
+        "(physics.md: ∝ |r̄|+|ḡ|+|b̄|, an inverse-CDF table) inside a bin, between the "
+        "covered bins' values across an edge; `tests/test_spectrum.py` checks both, and "
+        "the histograms against the table's own CDF (1 nm and 0.1 nm bins). Compiled "
+        "with fused multiply-adds and unsigned cell indices, the camera stage's spectral "
+        "pass costs 23 ns per path in the renderer (42 before; Cornell 128², 16 spp, "
+        "65 536-path wavefronts, by hand). Vectorising it gains nothing more: the stores "
+        "of λ, pdf and table coordinates (88 bytes per path) bound it. "
+        "**The light pick as a count** (`render/lane_paths.py`): `pick_lights` bisected "
+        "the light CDF in every lane; on the Cornell box (a CDF of three entries, the "
+        "light's two triangles at 0.5) each step is a branch that the lanes' random "
+        "numbers make unpredictable, 42 ns per path by a cycle counter in the kernel "
+        "(`llvm.readcyclecounter` around each stage, a throw-away copy of the kernel). A "
+        "CDF of up to 64 entries is now counted, #{k: cdf[k] ≤ u}, one broadcast compare "
+        "and add per entry over the sixteen lanes (vector code, no branch): 4 ns; "
+        "`path_floor --scene cornell` 510 → 476 ns per path (two alternated pairs, by "
+        "hand at 15:40); `tests/test_lane_paths.py` checks the count and the bisection "
+        f"against `searchsorted` (a `<` for `≤` was caught){'; ' + box if box else ''}. "
+        "The renderer's CPU per path against the code before this round "
+        "(`python -m relray.bench.ab 7faced5 --scene S`, 6 alternated pairs, 128², "
+        "16 spp, 1 thread, 15:56–15:59): Cornell **0.92×** (quartiles 0.92–0.93; "
+        "631 → 581 ns), environment-lit 0.95× (0.88–0.99; 500 → 476), heavy 0.96× "
+        "(0.92–0.98; 979 → 922), textured 0.96× (0.95–0.98; 1149 → 1115). "
+        "Where the environment-lit scene's lane kernel spends its time, by the same "
+        "cycle counter (380 ns per path with the counters): the refill of new paths 51, "
+        "`rtcIntersect16` with the prefetch and the numbers 84, the hits 50, the "
+        "escaping rays' map lookups 37, the light samples' texels (searches and "
+        "sigmoids) 55, the light samples and continuations 62, `rtcOccluded16` 26. "
+        "Tried there and dropped (`path_floor --scene environment`, alternated by "
+        "hand): the light samples' two CDF searches as vector code (a gather and a "
+        "select per step, the rare longer walks scalar: 371 against 373 ns); the texels' "
+        "sigmoids in single precision (354–375 against 367–374: noise); the refill and "
+        "the write-back without a branch on which lanes ended (a branch-free queue walk, "
+        "the new paths' rays as gathers and selects, every lane's radiance written each "
+        "packet: 476 against 480 on the box, 388–392 against 381–382 on the map).")
+
+
 def _lane_numbers_bullet(add, d) -> None:
     """The 2026-11-27 afternoon round: the lanes' numbers, indices and prefetches, the
     camera rays in blocks."""
@@ -2211,6 +2261,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _hero_table_bullet(add, d)
     _lane_numbers_bullet(add, d)
     _floors_bullet(add, d)
     _env_lanes_bullet(add, d)
@@ -2491,12 +2542,14 @@ def _section_recommendations(add, d) -> None:
         "spend about 600 ns per path outside the traversal (§6); the traversal itself "
         "bounds the scene's ratio to `llvm_ad_spectral` above 1 (§6, the moving scene's "
         "floor), so this would narrow the gap, not close it.")
-    add("3. **The environment map's remaining costs** (the environment-lit scene, now in "
-        "the lanes; `llvm_ad_spectral`'s goal still not met there): the texels' sigmoids "
-        "(about 50 ns per path: four per texel and lane, each a square root and a "
-        "division in double precision), the two CDF searches (about 43, guided since "
-        "2026-11-27 06:15), the four `exp` of λ at a path's start (about 20; a polynomial "
-        "`exp` would vectorise), the bilinear lookup of camera rays (23).")
+    add("3. **The environment-lit scene's lanes** (`llvm_ad_spectral`'s goal not met "
+        "there at the high level): by the kernel's cycle counter (2026-11-27 15:30) its "
+        "time is spread over the stages, none above a sixth (the refill of new paths "
+        "51 ns per path, the light samples 62, the hits 50, the light samples' texels "
+        "55, the escaping rays' lookups 37); vector searches, single-precision "
+        "sigmoids and a branch-free refill gained nothing (above). The refill's four "
+        "`exp` of λ per path (at most 14 ns, by taking them out) are what is left that "
+        "a polynomial could make vector code.")
     add("4. **The bodies' rest-frame traversal** (the moving scene): each body's rays "
         "are boosted and traced in its own BVH, one `rtcIntersect1` per body and ray "
         "(an `rtcIntersect8` packet over one masked scene is slower, above); a tighter "
@@ -2517,12 +2570,10 @@ def _section_recommendations(add, d) -> None:
         "`vgf2p8affineqb` (10 in the Cornell lane kernel); the kernel written with "
         "`llvm.bitreverse.i32` compiled to the same instructions (4515, the same mix), "
         "and `bench.ab HEAD --scene cornell` measured 1.03 (quartiles 1.01–1.09: noise).")
-    add("8. **The hero wavelengths' inverse CDF** (the camera stage, every scene: "
-        f"{_scene_ns(d, 'cornell', 'hero:'):.0f} ns per path in §6's profile): its guided "
-        "search and the "
-        "per-path Doppler shift are scalar; in blocks of 16 with the search as selects "
-        "(at most 6 steps in the 8192-entry guide, 96 % none) it could be vector code, "
-        "with the stack memory moved below the physics layer.")
+    add("8. ~~**The hero wavelengths' inverse CDF**~~: done (2026-11-27 15:40, above): "
+        "an inverse-CDF table on a uniform grid, "
+        f"{_scene_ns(d, 'cornell', 'hero:'):.0f} ns per path in §6's profile (39 before), "
+        "bounded by its stores.")
     add("")
 
 
