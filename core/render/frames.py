@@ -379,7 +379,8 @@ class FrameRenderer:
         s = self.settings
         n = len(pix)
         if out is None:
-            fresh = wavefront_buffers(n, None, CHUNK_BUFFERS)
+            fresh = wavefront_buffers(n, None, tuple(b for b in CHUNK_BUFFERS
+                                                     if b[0] in CAMERA_BUFFERS))
             out = tuple(fresh[k] for k in CAMERA_BUFFERS)
         keys = path_keys(s.seed, frame, pix, samp, out[4])
         camera = self.camera if event.rotation is None else \

@@ -125,11 +125,11 @@ _INVALID = np.uint32(0xFFFFFFFF)
 #: the words of a shadow ray's origin, direction and length in an RTCRay16
 _SHADOW_WORDS = (0, 1, 2, 4, 5, 6, TFAR)
 W = PACKET
-LINEAR_LIGHTS = 64
-"""Longest light CDF that :func:`pick_lights` counts through instead of bisecting."""
 """Lanes: the paths traced side by side (Embree's widest packet; :func:`lane_paths`'
 stack arrays are sized for 16, its packets for 16 lanes of PACKET_WORDS words)."""
 assert W == 16 and PACKET_WORDS * W == 384
+LINEAR_LIGHTS = 64
+"""Longest light CDF that :func:`pick_lights` counts through instead of bisecting."""
 
 
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
