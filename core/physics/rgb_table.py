@@ -302,6 +302,36 @@ def lambda_of_column(u):
     return math.exp(LOG_GRID_MIN + u * _DLOG)
 
 
+# exp(x) = 2ⁿ e^r for lambda_of_grid_column: ln 2 in two parts (Cody–Waite: n·_LN2_HI is
+# exact for |n| < 2¹¹) and the Taylor coefficients 1/k!, k = 0 … 13
+_LN2_HI = 6.93147180369123816490e-01
+_LN2_LO = 1.90821492927058770002e-10
+_INV_LN2 = 1.0 / math.log(2.0)
+_EXP_TAYLOR = tuple(1.0 / math.factorial(k) for k in range(14))
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def lambda_of_grid_column(u):
+    """:func:`lambda_of_column` as straight-line code, for u on the grid (0 ≤ u ≤
+    GRID_N − 1, λ from 1 nm to 100 µm): x = ln λ_min + u / INV_DLOG ∈ [0, ln 10⁵],
+    n = round(x / ln 2) ∈ [0, 17], r = x − n ln 2 (|r| ≤ ln 2 / 2, ln 2 in two parts),
+    e^r by its Taylor series through r¹³ (remainder < 4e-18) and 2ⁿ as a product of
+    selects over n's five bits (exact), so λ = 2ⁿ e^r within 4e-16 of libm's ``exp``
+    (``tests/test_rgb_table.py``). libm's ``exp`` is a call that leaves a loop over the
+    SIMD lanes scalar; this one vectorises (the lanes' refill, :mod:`..render.lane_paths`).
+    """
+    x = LOG_GRID_MIN + u * _DLOG
+    n = np.int64(x * _INV_LN2 + 0.5)
+    fn = np.float64(n)
+    r = (x - fn * _LN2_HI) - fn * _LN2_LO
+    p = _EXP_TAYLOR[13]
+    for k in range(12, -1, -1):
+        p = p * r + _EXP_TAYLOR[k]
+    two_n = (2.0 if n & 1 else 1.0) * (4.0 if n & 2 else 1.0) * (16.0 if n & 4 else 1.0) \
+        * (256.0 if n & 8 else 1.0) * (65536.0 if n & 16 else 1.0)
+    return two_n * p
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _coefficients_kernel(scale, data, rgb, out):
     for i in range(rgb.shape[0]):
