@@ -138,6 +138,9 @@ def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
     assert fr.whole_paths and fr.lane_paths
     assert lane_paths.kind(fr.kernel)[2] == ("textur" in scene or "checker" in scene)
     assert lane_paths.kind(fr.kernel)[3] == scene.startswith("environment")
+    # the map as the only light: the lanes make no other light's sample (MAP_LIGHT)
+    map_only = scene.startswith("environment") and "lights" not in scene
+    assert (lane_paths.kind(fr.kernel)[1] == lane_paths.MAP_LIGHT) == map_only
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth = fr.settings.max_depth
     seen = not fr.settings.transparent

@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from ..physics.rgb_table import lambda_of_grid_column
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
 from . import whole_paths
@@ -130,6 +131,8 @@ stack arrays are sized for 16, its packets for 16 lanes of PACKET_WORDS words)."
 assert W == 16 and PACKET_WORDS * W == 384
 LINEAR_LIGHTS = 64
 """Longest light CDF that :func:`pick_lights` counts through instead of bisecting."""
+TRIANGLE_LIGHTS, ANY_LIGHTS, MAP_LIGHT = 0, 1, 2
+"""The kinds of a scene's lights the lanes are compiled for (:func:`light_kind`)."""
 
 
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
@@ -381,6 +384,24 @@ def texel_values(co, rgb, spec, out, o):  # pragma: no cover - compiled
 
 
 @njit(**_LANES)
+def env_refill(emit, env_row, rgb, nlanes, fresh, li, lf, spec):  # pragma: no cover - compiled
+    """The map's lookups for the lanes that took a new path (``fresh``), whose ``elam``
+    holds their table columns u (the camera stage's, on the grid): λ =
+    :func:`..physics.rgb_table.lambda_of_grid_column` (u) and E(λ) of the map's emission
+    row, as :func:`.whole_paths.env_lanes_at` makes them (rgb mode: λ unused zeros, the
+    fourth E 0). The other lanes keep theirs. Straight-line code over the 16 lanes
+    (libm's ``exp`` in the scalar refill cost about 33 ns per path on the
+    environment-lit scene)."""
+    elam, ebase = spec
+    for j in range(4):
+        for lane in range(W):
+            lam = 0.0 if rgb else lambda_of_grid_column(elam[j, lane])
+            e = lane_lerp(emit, env_row, li[j, lane], lf[j, lane]) if j < nlanes else 0.0
+            elam[j, lane] = lam if fresh[lane] else elam[j, lane]
+            ebase[j, lane] = e if fresh[lane] else ebase[j, lane]
+
+
+@njit(**_LANES)
 def env_texels(env_tex, rgb, spec, texels, co, vals, bilinear):  # pragma: no cover - compiled
     """The radiance of the lanes' four texels of :func:`env_misses` into ``vals`` (rows
     4t … 4t + 3 for texel t = (r0, c0), (r0, c1), (r1, c0), (r1, c1)); without a lane
@@ -465,17 +486,19 @@ def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
 
 
 @njit(**_LANES)
-def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general, env_on,
+def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, lights, env_on,
                  env, etex, evals, ub):  # pragma: no cover - compiled
     """Each lane's next-event estimation towards its light (the shadow ray into the
     ``RTCRay16`` ``shadow``, valid where the sample counts; its contribution thr ρ/π
     cos θ_i w L_e / p_light into ``nee``), then its continuation, cosine-weighted about
     g (the next ray, throughput × ρ, the roulette from ``RR_DEPTH`` on the largest lane:
     ``alive`` whether the path goes on; the numbers from ``ua`` and ``ub``,
-    :func:`bounce_numbers`). With a map (``env_on``), a lane whose light is
-    the map takes :func:`.environment.env_sample`'s direction in the texel ``etex``
+    :func:`bounce_numbers`). With a map (``env_on``), a lane whose light is the map takes
+    :func:`.environment.env_sample`'s direction in the texel ``etex``
     (:func:`pick_texels`), its pdf, and the texel's radiance at its λ (``evals``' first
-    four rows, :func:`texel_values`)."""
+    four rows, :func:`texel_values`). ``lights``: the scene's kind of lights
+    (:data:`TRIANGLE_LIGHTS`, :data:`ANY_LIGHTS`, :data:`MAP_LIGHT`: then no other
+    light's sample is made, which cost 28 ns per path on the environment-lit scene)."""
     v0, e1, e2, ng, area, tri_mat = geo[:6]
     (_, emit, _, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
      l_cdf) = mats[:-2]
@@ -493,7 +516,10 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, gene
         gx, gy, gz = gn[0, lane], gn[1, lane], gn[2, lane]
         nx, ny, nz = nrm[0, lane], nrm[1, lane], nrm[2, lane]
         ep = eps[lane]
-        if general:  # any kind of light
+        if lights == MAP_LIGHT:  # the map's own sample below is the only one
+            (wx, wy, wz), p_l, scale, delta, finite, target, ok = (
+                (0.0, 0.0, 1.0), 0.0, 0.0, False, False, (0.0, 0.0, 0.0), False)
+        elif lights == ANY_LIGHTS:
             (wx, wy, wz), p_l, scale, delta, finite, target, ok = lightmod.sample_light(
                 lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot, v0,
                                       e1, e2, ng, area, tri_mat, one_sided),
@@ -507,7 +533,7 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, gene
         is_env = False
         r_e, c_e = etex[0, lane], etex[1, lane]
         if env_on:  # the map's sample (environment.env_light_sample) where it is the light
-            is_env = l_kind[k] == lightmod.ENV
+            is_env = lights == MAP_LIGHT or l_kind[k] == lightmod.ENV
             fv = place(env_marg[r_e], env_marg[r_e + 1], u1)
             fu = place(env_cond[r_e, c_e], env_cond[r_e, c_e + 1], ua[1, lane])
             (ex, ey, ez), st = direction_of((c_e + fu) / w_e, (r_e + fv) / h_e, env_rot)
@@ -573,14 +599,16 @@ def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
             acc[j, lane] += nee[j, lane] if seen else 0.0
 
 
-def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
+def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
     """The lane kernel for one kind of scene (:func:`kernel`): ``smooth`` vertex normals,
-    ``general`` lights other than emissive triangles (point, spot, sun, the constant
-    sky, the map), ``textured`` image textures (:func:`texture_lanes`), ``env_on`` an
+    ``lights`` emissive triangles only (:data:`TRIANGLE_LIGHTS`), other lights too (point,
+    spot, sun, the constant sky, the map: :data:`ANY_LIGHTS`) or the map alone
+    (:data:`MAP_LIGHT`), ``textured`` image textures (:func:`texture_lanes`), ``env_on`` an
     environment map (:func:`env_misses`, :func:`pick_texels`). The four are constants of
     the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
     carry no normal interpolation, no light kinds it does not have and no texture lookups
     (numba's on-disk cache keys each variant by its closure's values)."""
+    general = lights == ANY_LIGHTS  # the constant sky: hits of no triangle may be lit
 
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
@@ -633,6 +661,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
         # static scene), the texel each lane's light sample would take
         elam = stack_array(4, 16, np.float64)
         ebase = stack_array(4, 16, np.float64)
+        fresh = stack_array(1, 16, np.bool_)[0]
         etex = stack_array(2, 16, np.int64)
         # the texels the escaped rays see (rows, columns; weights), one texel's
         # coefficient rows, the lanes' radiance of up to four texels
@@ -650,7 +679,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
         for lane in range(W):
             path[lane], key[lane], depth[lane], prev_pdf[lane] = -1, 0, 0, 0.0
             eps[lane], pos[lane] = 0.0, 0
-            alive[lane], cont[lane] = False, False
+            alive[lane], cont[lane], fresh[lane] = False, False, False
             for c in range(6):
                 ray[c, lane] = 0.0
             for c in range(3):
@@ -679,6 +708,9 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
         while True:
             # the lanes whose path ended take the next camera rays
             busy = 0
+            if env_on:
+                for lane in range(W):
+                    fresh[lane] = False
             for lane in range(W):
                 if path[lane] < 0 and nxt < n_paths:
                     i = nxt
@@ -696,16 +728,17 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                     prev_pdf[lane] = 0.0
                     if textured:
                         cone[0, lane], cone[1, lane] = 0.0, np.float64(spread[i])
-                    if env_on:  # the map's λ and E(λ) for the path's lanes
-                        lam4, base4 = whole_paths.env_lanes_at(emit, env_row, lamu[i:i + 1],
-                                                               0.0, rgb, nlanes)
+                    if env_on:  # the lanes' columns, for env_refill
+                        fresh[lane] = True
                         for j in range(4):
-                            elam[j, lane], ebase[j, lane] = lam4[j], base4[j]
+                            elam[j, lane] = lamu[i, j]
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
                     busy += 1
             if busy == 0:
                 break
+            if env_on:
+                env_refill(emit, env_row, rgb, nlanes, fresh, li, lf, spec)
             fill_packet(ray, path, hit, hitf, valid)
             n_rays += busy
             if record:
@@ -730,7 +763,7 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
                 pick_texels(env, (env_mguide, env_cguide), l_cdf, ua, pos, etex)
                 texel_rows(env_tex, etex, 0, 1, co)
                 texel_values(co, rgb, spec, evals, 0)
-            sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, general,
+            sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, lights,
                          env_on, env, etex, evals, ub)
             for lane in range(W):
                 n_sh += svalid[lane] != 0
@@ -760,24 +793,35 @@ def _compile(smooth: bool, general: bool, textured: bool, env_on: bool) -> Any:
     return lane_paths
 
 
-def kind(sc: KernelScene) -> tuple[bool, bool, bool, bool]:
-    """The scene's kind of lane kernel (:func:`_compile`): (vertex normals, lights other
-    than emissive triangles or a constant sky, image textures, an environment map)."""
-    return (bool(sc.has_vn), bool(np.any(np.asarray(sc.l_kind) != lightmod.TRIANGLE))
-            or int(sc.sky_row) >= 0, bool(sc.tex.enabled), bool(sc.env_on))
+def light_kind(sc: KernelScene) -> int:
+    """The scene's lights for the lanes: :data:`MAP_LIGHT` where the environment map is
+    the only one (an HDRI-lit scene), :data:`TRIANGLE_LIGHTS` where every light is an
+    emissive triangle (and no constant sky), else :data:`ANY_LIGHTS`."""
+    kinds = np.asarray(sc.l_kind)
+    if int(sc.sky_row) < 0 and len(kinds) == 1 and kinds[0] == lightmod.ENV:
+        return MAP_LIGHT
+    if int(sc.sky_row) < 0 and np.all(kinds == lightmod.TRIANGLE):
+        return TRIANGLE_LIGHTS
+    return ANY_LIGHTS
 
 
-#: the compiled variants, by (smooth, general, textured, map) (:func:`kernel`)
-_KERNELS: dict[tuple[bool, bool, bool, bool], Any] = {}
+def kind(sc: KernelScene) -> tuple[bool, int, bool, bool]:
+    """The scene's kind of lane kernel (:func:`_compile`): (vertex normals, its lights
+    (:func:`light_kind`), image textures, an environment map)."""
+    return bool(sc.has_vn), light_kind(sc), bool(sc.tex.enabled), bool(sc.env_on)
+
+
+#: the compiled variants, by (smooth, lights, textured, map) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, int, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def kernel(smooth: bool, general: bool, textured: bool = False, env_on: bool = False) -> Any:
-    """The lane kernel for scenes with or without vertex normals, with or without
-    lights other than emissive triangles, with or without image textures, with or
-    without a colour environment map (:func:`_compile`); made once per kind, also when several
-    render threads ask for it at once."""
-    key = (bool(smooth), bool(general), bool(textured), bool(env_on))
+def kernel(smooth: bool, lights: int, textured: bool = False, env_on: bool = False) -> Any:
+    """The lane kernel for scenes with or without vertex normals, with emissive
+    triangles, any lights or the map alone (:func:`light_kind`), with or without image
+    textures, with or without a colour environment map (:func:`_compile`); made once per
+    kind, also when several render threads ask for it at once."""
+    key = (bool(smooth), int(lights), bool(textured), bool(env_on))
     with _KERNELS_LOCK:
         if key not in _KERNELS:
             _KERNELS[key] = _compile(*key)
