@@ -439,18 +439,24 @@ def add_env(lanes, texels, vals):  # pragma: no cover - compiled
 
 
 @njit(**_LANES)
-def pick_texels(env, guides, l_cdf, ua, pos, etex):  # pragma: no cover - compiled
+def pick_texels(env, guides, l_cdf, ua, pos, cont, etex):  # pragma: no cover - compiled
     """Each lane's texel of the map for next-event estimation, as
     :func:`.environment.env_sample` picks it: the row from the marginal CDF at u1 (the
     light's number rescaled inside its step of the light CDF), the column from that
     row's conditional CDF at u2, each searched from its guide table
     (:func:`..physics.spectrum.guided_bin`: a walk of about one step, scalar per lane; a
     bisection in every lane, nine and ten dependent gathers, cost about twice as much);
-    into ``etex`` (row, column). Every lane searches, its light the map or not
-    (:func:`sample_lanes` uses the texel where it is)."""
+    into ``etex`` (row, column). Every lane whose path goes on (``cont``) searches, its
+    light the map or not (:func:`sample_lanes` uses the texel where it is); the others
+    (a ray that escaped, a path at its last bounce) take texel (0, 0), which nothing
+    uses (skipping their searches saved about 20 ns per path on the environment-lit
+    scene, the kernel's cycle counts)."""
     _, marg, cond, _, _ = env
     mguide, cguide = guides
     for lane in range(W):
+        if not cont[lane]:
+            etex[0, lane], etex[1, lane] = 0, 0
+            continue
         _, p_sel, lo = lightmod.selected(l_cdf, pos[lane])
         r = guided_bin(marg, mguide, rescale_uniform(ua[0, lane], lo, p_sel))
         etex[0, lane] = r
@@ -760,7 +766,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
                               lanes, bounce, cone, scratch)
             pick_lights(l_cdf, ua, pos)
             if env_on:
-                pick_texels(env, (env_mguide, env_cguide), l_cdf, ua, pos, etex)
+                pick_texels(env, (env_mguide, env_cguide), l_cdf, ua, pos, cont, etex)
                 texel_rows(env_tex, etex, 0, 1, co)
                 texel_values(co, rgb, spec, evals, 0)
             sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, lights,
