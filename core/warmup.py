@@ -77,9 +77,10 @@ def _write_image(path: Path, pixels: np.ndarray) -> str:
 def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     """:data:`LAMBERT_JOB` under a constant sky, with a smooth-shaded sphere, with both,
     without its light, under an environment map, with both and an image texture (the
-    default fly-by's kind), with that under the map instead, and with its box moving:
+    default fly-by's kind), with that under the map instead, the smooth one and the
+    textured one lit by the map alone (an HDRI-lit scene), and with its box moving:
     the SIMD lanes (``render/lane_paths.py``: :data:`LAMBERT_JOB` itself, the first three,
-    the textured one and the two under the map) and the whole-path kernel (the one
+    the textured one and the four under the map) and the whole-path kernel (the one
     without a light, the moving one) are compiled apart for each kind
     (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map and 2 × 2 texture
     are written into ``folder``."""
@@ -96,8 +97,12 @@ def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     tex["materials"][0]["base_color_texture"] = checker
     moving = copy.deepcopy(LAMBERT_JOB)
     moving["objects"][0]["velocity"] = [0.0, 0.0, 0.5]
+    # the map as the only light (lane_paths.MAP_LIGHT): the lamp left out
+    map_lit = [{**job, "scene": env["scene"],
+                "objects": [o for o in job["objects"] if o["material"] != "lamp"]}
+               for job in (smooth, tex)]
     return [under_sky, smooth, {**smooth, "scene": under_sky["scene"]}, dark, env, tex,
-            {**tex, "scene": env["scene"]}, moving]
+            {**tex, "scene": env["scene"]}, *map_lit, moving]
 
 
 def warmup_jobs(folder: Path) -> list[dict[str, Any]]:

@@ -10,6 +10,9 @@ import pytest
 
 from relray.core import warmup
 from relray.core.render.frames import prepare
+from relray.core.render.lane_paths import ANY_LIGHTS as ANY
+from relray.core.render.lane_paths import MAP_LIGHT as MAP
+from relray.core.render.lane_paths import TRIANGLE_LIGHTS as TRI
 from relray.core.render.rest_frames import MovingScene
 from relray.core.scene.geometry import build_scene
 from relray.core.scene.job import load_job, parse_job
@@ -47,8 +50,9 @@ def whole_path_kernel(job):
 
 
 def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
-    """The SIMD lanes compiled apart for flat or smooth shading, for emissive triangles
-    or other lights too, for textures and for a colour map (``lane_paths.kernel``), and
+    """The SIMD lanes compiled apart for flat or smooth shading, for emissive triangles,
+    other lights too or the map alone, for textures and for a colour map
+    (``lane_paths.kernel``), and
     the whole-path kernel compiled apart for a scene without a light and for moving
     bodies (``whole_paths.kernel``; a spectral map's, or a map's with moving bodies, is
     compiled at its first render): the warm-up renders each kind, with the argument types the
@@ -59,16 +63,17 @@ def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
     warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
             for d in warmup.warmup_jobs(tmp_path)} - {None}
     assert {kind[:-1] for kind in warm} == {
-        ("lanes", False, False, False, False), ("lanes", False, True, False, False),
-        ("lanes", True, False, False, False), ("lanes", True, True, False, False),
-        ("lanes", True, True, True, False), ("lanes", False, True, False, True),
-        ("lanes", True, True, True, True), (False, False, False), (False, False, True)}
+        ("lanes", False, TRI, False, False), ("lanes", False, ANY, False, False),
+        ("lanes", True, TRI, False, False), ("lanes", True, ANY, False, False),
+        ("lanes", True, ANY, True, False), ("lanes", False, ANY, False, True),
+        ("lanes", True, ANY, True, True), ("lanes", True, MAP, False, True),
+        ("lanes", True, MAP, True, True), (False, False, False), (False, False, True)}
     for preset in ("cornell.toml", "seed_figures/fig1-1.toml", "stars/ahead.toml",
                    "flyby.toml", "moving/train.toml", "moving/terrell.toml"):
         assert whole_path_kernel(load_job(PRESETS / preset)) in warm, preset
     assert whole_path_kernel(load_job(PRESETS / "cornell.toml"))[:5] == (
-        "lanes", False, False, False, False)
+        "lanes", False, TRI, False, False)
     assert whole_path_kernel(load_job(PRESETS / "seed_figures/fig1-1.toml"))[:5] == (
-        "lanes", True, True, False, False)
+        "lanes", True, ANY, False, False)
     assert whole_path_kernel(load_job(PRESETS / "flyby.toml"))[:5] == (
-        "lanes", True, True, True, False)
+        "lanes", True, ANY, True, False)
