@@ -97,8 +97,10 @@ def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     tex["materials"][0]["base_color_texture"] = checker
     moving = copy.deepcopy(LAMBERT_JOB)
     moving["objects"][0]["velocity"] = [0.0, 0.0, 0.5]
-    # the map as the only light (lane_paths.MAP_LIGHT): the lamp left out
+    # the map as the only light, nothing else glowing (lane_paths.MAP_LIGHT): the lamp
+    # and its material left out
     map_lit = [{**job, "scene": env["scene"],
+                "materials": [m for m in job["materials"] if m["name"] != "lamp"],
                 "objects": [o for o in job["objects"] if o["material"] != "lamp"]}
                for job in (smooth, tex)]
     return [under_sky, smooth, {**smooth, "scene": under_sky["scene"]}, dark, env, tex,

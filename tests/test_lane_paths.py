@@ -85,7 +85,9 @@ def _map_scene(scene: str, spectral: str, folder, **render) -> dict:
     """The map-lit scene of test_whole_paths (ground, smooth ball, box under a 32 × 16
     map with a 1-texel sun); ``+transparent`` on a transparent film, ``+lights`` with
     point, spot and sun lights beside the map in the light CDF, ``+checker`` with
-    base-colour and normal textures."""
+    base-colour and normal textures, ``+infrared`` with the ground glowing at 0.9–1.3 µm
+    only: no light (no luminance at rest), seen by a camera fast enough to shift it into
+    the visible."""
     data = environment_scene(folder, spectral=spectral, spp=8, **render)
     change = scene.partition("+")[2]
     if change == "transparent":
@@ -94,6 +96,12 @@ def _map_scene(scene: str, spectral: str, folder, **render) -> dict:
         _delta_lights(data)
     elif change == "checker":
         _checker(data, folder)
+    elif change == "infrared":
+        data["materials"].append({"name": "glow", "base_color": [0.6, 0.6, 0.6],
+                                  "emission_spectrum": {"nm": [900.0, 1000.0, 1200.0, 1300.0],
+                                                        "values": [0.0, 1.0, 1.0, 0.0]},
+                                  "emission_strength": 5.0})
+        data["objects"][0]["material"] = "glow"
     return data
 
 
@@ -131,15 +139,18 @@ def lane_scene(scene: str, spectral: str, beta: float, folder=None, **render) ->
     ("environment", "rgb", 0.0, {}), ("environment", "seed-gaussian", 0.3, {}),
     ("environment", "cie1931", 0.0, {"max_depth": 2}),
     ("environment+transparent", "cie1931", 0.0, {}), ("environment+lights", "cie1931", 0.4, {}),
-    ("environment+lights", "rgb", 0.0, {}), ("environment+checker", "cie1931", 0.3, {})])
+    ("environment+lights", "rgb", 0.0, {}), ("environment+checker", "cie1931", 0.3, {}),
+    ("environment+infrared", "cie1931", 0.6, {})])
 def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
         tmp_path, scene, spectral, beta, render):
     fr, ev = renderer(lane_scene(scene, spectral, beta, tmp_path, **render), tmp_path)
     assert fr.whole_paths and fr.lane_paths
     assert lane_paths.kind(fr.kernel)[2] == ("textur" in scene or "checker" in scene)
     assert lane_paths.kind(fr.kernel)[3] == scene.startswith("environment")
-    # the map as the only light: the lanes make no other light's sample (MAP_LIGHT)
-    map_only = scene.startswith("environment") and "lights" not in scene
+    # the map as the only light and nothing else glowing: the lanes make no other
+    # light's sample and look up no emission (MAP_LIGHT)
+    map_only = scene.startswith("environment") and scene.partition("+")[2] not in (
+        "lights", "infrared")
     assert (lane_paths.kind(fr.kernel)[1] == lane_paths.MAP_LIGHT) == map_only
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth = fr.settings.max_depth

@@ -215,12 +215,14 @@ def bounce_numbers(key, depth, ua, ub):  # pragma: no cover - compiled
 
 @njit(**_LANES)
 def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce, smooth,
-               general):  # pragma: no cover - compiled
+               lights):  # pragma: no cover - compiled
     """The packet's hits, lane by lane: the point and the geometric normal turned towards
     the ray (``pt``, ``gn``), the emission of a front face (or a two-sided emitter) times
     the throughput into ``acc`` (MIS-weighted against NEE, w = p_bsdf² / (p_bsdf² +
     p_light²), p_light = p_sel t² / (A |cos θ_g|); the camera ray w = 1), ρ(λ) per lane,
-    the offset ε(p), whether the path goes on (``cont``).
+    the offset ε(p), whether the path goes on (``cont``). Lit by the map alone
+    (``lights`` :data:`MAP_LIGHT`: no material emits) the emission is not looked up
+    (15 ns per path on the environment-lit scene).
     The hit's triangle comes from its packed record (``geo[8]``,
     :func:`.integrator.triangle_records`). ``geo``, ``mats``, ``lanes``, ``bounce``:
     :func:`lane_paths`' tuples."""
@@ -259,14 +261,15 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
         # on a transparent film)
         sky = False
         row = er if er >= 0 else 0
-        if general:
+        if lights == ANY_LIGHTS:
             sky = path[lane] >= 0 and not h and sky_row >= 0 and (dep > 0 or sky_seen)
             if dep > 0 and sky_pmf > 0.0:
                 wt = wt if h else power_heuristic(prev_pdf[lane], w_sky)
             row = row if h else max(sky_row, 0)
         for j in range(4):
-            e = thr[j, lane] * wt * lane_lerp(emit, row, li[j, lane], lf[j, lane])
-            acc[j, lane] += e if lit or sky else 0.0
+            if lights != MAP_LIGHT:
+                e = thr[j, lane] * wt * lane_lerp(emit, row, li[j, lane], lf[j, lane])
+                acc[j, lane] += e if lit or sky else 0.0
             rho[j, lane] = lane_lerp(refl, m, li[j, lane], lf[j, lane])
         cont[lane] = h and dep + 1 < max_depth
         eps[lane] = ray_offset_at(eps_base, p[0], p[1], p[2])
@@ -614,8 +617,6 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
     the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
     carry no normal interpolation, no light kinds it does not have and no texture lookups
     (numba's on-disk cache keys each variant by its closure's values)."""
-    general = lights == ANY_LIGHTS  # the constant sky: hits of no triangle may be lit
-
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
@@ -756,7 +757,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
             prefetch_hits(tri_rec, path, hit)
             bounce_numbers(key, depth, ua, ub)
             shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce,
-                       smooth, general)
+                       smooth, lights)
             if env_on:
                 bilinear = env_misses(env, sky_pmf, sky_seen, hit, lanes, texels) > 0
                 env_texels(env_tex, rgb, spec, texels, co, evals, bilinear)
@@ -801,10 +802,12 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
 
 def light_kind(sc: KernelScene) -> int:
     """The scene's lights for the lanes: :data:`MAP_LIGHT` where the environment map is
-    the only one (an HDRI-lit scene), :data:`TRIANGLE_LIGHTS` where every light is an
-    emissive triangle (and no constant sky), else :data:`ANY_LIGHTS`."""
+    the only light and no material emits (an HDRI-lit scene), :data:`TRIANGLE_LIGHTS`
+    where every light is an emissive triangle (and no constant sky), else
+    :data:`ANY_LIGHTS`."""
     kinds = np.asarray(sc.l_kind)
-    if int(sc.sky_row) < 0 and len(kinds) == 1 and kinds[0] == lightmod.ENV:
+    if (int(sc.sky_row) < 0 and len(kinds) == 1 and kinds[0] == lightmod.ENV
+            and not np.any(np.asarray(sc.mat_emit_row) >= 0)):
         return MAP_LIGHT
     if int(sc.sky_row) < 0 and np.all(kinds == lightmod.TRIANGLE):
         return TRIANGLE_LIGHTS
