@@ -1991,6 +1991,50 @@ def peer_ratios(d, scene: str) -> tuple[dict, str]:
     return ratio, text
 
 
+def _map_light_bullet(add, d) -> None:
+    """The 2026-11-27 night round: the environment-lit scene's lanes (the map's λ in
+    vector code, a kernel for the map as the only light, searches only where a light
+    sample is made), and the alias table tried for the map's texels."""
+    pf = {r["scene"]: r for r in d["path_floor"]}
+    env = pf.get("environment", {})
+    lanes = (f" (§6's run: {env['lanes_ns']:.0f} ns per path in the lanes, "
+             f"{env['whole_ns']:.0f} as whole paths)"
+             if _num(env.get("lanes_ns")) and _num(env.get("whole_ns")) else "")
+    add("- **The environment-lit scene's lanes** (`render/lane_paths.py`, "
+        "`physics/rgb_table.py`, 2026-11-27 18:05–18:50; the lane kernel's cycle counts, "
+        "by stage, found each cost): (1) the lanes that take a new path got the map's "
+        "λ and E(λ) from libm's `exp` and two compiled-apart lerps per lane in the scalar "
+        "refill; they now come from one loop over the 16 lanes (`env_refill`), λ by "
+        "`rgb_table.lambda_of_grid_column` — 2ⁿ by selects over n's bits and e^r by its "
+        "Taylor series through r¹³, within 4e-16 of libm's `exp` over the whole grid and "
+        "packed code without a call (`tests/test_rgb_table.py`): the refill 51 → 35 ns "
+        "per path; (2) a lane kernel per kind of lights (`lane_paths.light_kind`: "
+        "`TRIANGLE_LIGHTS`, `ANY_LIGHTS`, `MAP_LIGHT`, a compile-time constant like the "
+        "other flags): with the map as the only light and no material emitting (an "
+        "HDRI-lit scene) no other light's sample is made (the light samples and "
+        "continuations 62 → 28 ns) and the hits look up no emission (50 → 31 ns); a "
+        "material that glows only outside the visible keeps the lookup "
+        "(`tests/test_lane_paths.py`: a ground glowing at 0.9–1.3 µm under the map, "
+        "seen at β = 0.6, where 60 % of the paths differ without it), and the warm-up "
+        "renders the map-lit kinds; (3) the map's two CDF searches only for the lanes "
+        "whose path goes on (an escaped ray or a last bounce makes no light sample): "
+        "54 → 35 ns with the texels' sigmoids. The renderer's CPU per path on that scene "
+        "against the code before (`python -m relray.bench.ab 6adeacd --scene "
+        "environment`, 6 alternated pairs, 128², 16 spp, 1 thread): (1) and (2) **0.89×** "
+        "(quartiles 0.88–0.92; 482 → 430 ns), with (3) **0.85×** (0.82–0.89; 484 → 410), "
+        "with the emission left out **0.79×** (0.73–0.82; 493 → 393, 18:51); the Cornell "
+        f"box unchanged (1.00×, quartiles 1.00–1.01){lanes}. "
+        "Tried and dropped: the map's texel drawn from an alias table over all texels "
+        "(Walker/Vose: one cell read, vector code; the searches 50 → 22 ns), because it "
+        "throws away what the two-dimensional inversion keeps, the stratification of the "
+        "Sobol points over the map: on `tests/test_environment.py`'s bright patch under "
+        "a dim sky (NEE + MIS, 24², the quadrature as truth) its relative RMS error per "
+        "pixel was 0.052 / 0.051 against 0.024 / 0.021 at 32 spp and 0.026 / 0.024 "
+        "against 0.0069 / 0.0069 at 128 spp (two seeds): 5–14× the MSE for 4 % of the "
+        "time; the CDF searches as branch-free steps over the lanes again (53–56 against "
+        "58 ns with the counters: noise).")
+
+
 def _hero_table_bullet(add, d) -> None:
     """The 2026-11-27 evening round: the hero wavelengths from a table, the light pick
     as a count, and a cycle-counter profile of the lane kernel."""
@@ -2262,6 +2306,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _map_light_bullet(add, d)
     _hero_table_bullet(add, d)
     _lane_numbers_bullet(add, d)
     _floors_bullet(add, d)
@@ -2543,14 +2588,17 @@ def _section_recommendations(add, d) -> None:
         "spend about 600 ns per path outside the traversal (§6); the traversal itself "
         "bounds the scene's ratio to `llvm_ad_spectral` above 1 (§6, the moving scene's "
         "floor), so this would narrow the gap, not close it.")
-    add("3. **The environment-lit scene's lanes** (`llvm_ad_spectral`'s goal not met "
-        "there at the high level): by the kernel's cycle counter (2026-11-27 15:30) its "
-        "time is spread over the stages, none above a sixth (the refill of new paths "
-        "51 ns per path, the light samples 62, the hits 50, the light samples' texels "
-        "55, the escaping rays' lookups 37); vector searches, single-precision "
-        "sigmoids and a branch-free refill gained nothing (above). The refill's four "
-        "`exp` of λ per path (at most 14 ns, by taking them out) are what is left that "
-        "a polynomial could make vector code.")
+    add("3. ~~**The environment-lit scene's lanes**~~: done (2026-11-27 18:50, above: "
+        "the map's λ as vector code, a kernel for the map as the only light, the "
+        "searches only where a light sample is made; 0.79× its CPU per path). What is "
+        "left there, by the kernel's cycle counter (about 300 ns per path): Embree about "
+        "105, the hits 31, the escaping rays' lookups 37, the light samples' searches "
+        "and texels 35, the light samples and continuations 28, the refill 35; around "
+        "the kernel (§6's profile) the hero wavelengths "
+        f"{_scene_ns(d, 'environment', 'hero:'):.0f}, the sensor values and the film "
+        f"{_scene_ns(d, 'environment', 'film:'):.0f}, the camera rays "
+        f"{_scene_ns(d, 'environment', 'camera:'):.0f} (the next step 6 would take part "
+        "of the film's).")
     add("4. **The bodies' rest-frame traversal** (the moving scene): each body's rays "
         "are boosted and traced in its own BVH, one `rtcIntersect1` per body and ray "
         "(an `rtcIntersect8` packet over one masked scene is slower, above); a tighter "
