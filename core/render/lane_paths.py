@@ -617,6 +617,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
     the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
     carry no normal interpolation, no light kinds it does not have and no texture lookups
     (numba's on-disk cache keys each variant by its closure's values)."""
+
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
@@ -715,10 +716,8 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
         while True:
             # the lanes whose path ended take the next camera rays
             busy = 0
-            if env_on:
-                for lane in range(W):
-                    fresh[lane] = False
             for lane in range(W):
+                fresh[lane] = False
                 if path[lane] < 0 and nxt < n_paths:
                     i = nxt
                     nxt += 1
