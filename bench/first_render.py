@@ -99,8 +99,9 @@ def _python_env(pycache: Path) -> dict[str, str]:
 
 
 def _cli_once(job: Path, out: Path, kernels: Path | None, pycache: Path) -> dict:
-    """Wall and CPU seconds of one ``relray render job --spp 1`` process (start to exit),
-    with ``kernels`` as its numba cache (None: the default one) and its bytecode in
+    """Wall and CPU seconds of one ``relray render job --spp 1`` process (start to exit;
+    ``python -m relray``, what the console script runs: :func:`relray.cli_main`), with
+    ``kernels`` as its numba cache (None: the default one) and its bytecode in
     ``pycache``."""
     import resource
     import time
@@ -110,7 +111,7 @@ def _cli_once(job: Path, out: Path, kernels: Path | None, pycache: Path) -> dict
         env["NUMBA_CACHE_DIR"] = str(kernels)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "relray.core.cli", "render", str(job), "--spp", "1",
+    subprocess.run([sys.executable, "-m", "relray", "render", str(job), "--spp", "1",
                     "--out", str(out), "--overwrite", "--quiet"], env=env, check=True,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=1800)
     wall = time.perf_counter() - t0

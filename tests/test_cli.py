@@ -1,5 +1,6 @@
 """The command line: renders, resume, info, contact sheets and one-line user errors."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -312,3 +313,39 @@ def test_signal_after_the_finish_is_ignored(tmp_path):
     r = subprocess.run([sys.executable, "-c", code, str(write_job(tmp_path))],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stderr == "", r.stderr
+
+
+FREEZE_PROBE = """
+import gc, json, sys, relray
+sys.argv = ['relray', 'render', sys.argv[1], '--quiet', '--spp', '1']
+collections, freezes, freeze = [], [], gc.freeze
+gc.callbacks.append(lambda phase, info: phase == 'start' and collections.append(0))
+def watched():
+    freezes.append((gc.isenabled(), len(collections), gc.get_freeze_count()))
+    freeze()
+gc.freeze = watched
+collections.clear()
+rc = relray.cli_main()
+print(json.dumps({'rc': rc, 'freezes': freezes, 'enabled': gc.isenabled(),
+                  'collections': len(collections), 'frozen': gc.get_freeze_count()}))
+"""
+
+
+def test_command_freezes_the_objects_of_its_imports_and_of_its_end(tmp_path):
+    """``relray.cli_main`` imports with the collector off and freezes what the imports
+    made (numba's registries: tens of thousands of objects), collects as usual while the
+    command runs, and freezes everything when it is done, so the interpreter's exit
+    walks nothing; the frames are written."""
+    job = write_job(tmp_path)
+    r = subprocess.run([sys.executable, "-c", FREEZE_PROBE, str(job)], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert got["rc"] == 0 and len(got["freezes"]) == 2, got
+    (on_at_import, seen_at_import, before_import), (on_at_end, seen_at_end, _) = got["freezes"]
+    assert not on_at_import and seen_at_import == 0, got  # no collection during the imports
+    assert on_at_end and got["enabled"], got  # on again for the command
+    assert got["frozen"] > before_import + 50_000, got  # the imports' objects, then the rest
+    names = sorted(p.name for p in (tmp_path / "out").iterdir())
+    stems = sorted({n.rsplit(".", 1)[0] for n in names})
+    assert stems and names == sorted(f"{s}.{x}" for s in stems for x in ("exr", "png")), names
