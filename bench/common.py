@@ -139,6 +139,28 @@ def cpu_share(threads: int | None = None, seconds: float = 0.4) -> float:
     return (time.process_time() - c0) / (threads * (time.perf_counter() - t0))
 
 
+def _python_loop(n: int) -> int:
+    """A fixed pure-Python loop (the interpreter's speed)."""
+    s = 0
+    for i in range(n):
+        s += i
+    return s
+
+
+def interpreter_seconds(n: int = 2_000_000, repeat: int = 3) -> float:
+    """CPU seconds of this process for a fixed pure-Python loop of ``n`` additions, the
+    fastest of ``repeat``: the machine's speed at what the interpreter does (imports,
+    start-up), which changes between sessions as the cloud gives another machine or a
+    busier one. Recorded with every section, so that absolute figures (the first image's
+    second) can be told apart from a slower machine."""
+    best = math.inf
+    for _ in range(repeat):
+        c = time.thread_time()
+        _python_loop(n)
+        best = min(best, time.thread_time() - c)
+    return best
+
+
 def wait_for_idle(max_load: float = 0.6, timeout: float = 600.0, poll: float = 15.0,
                   log=None) -> dict[str, float]:
     """Wait until the 1-minute load average is below ``max_load`` (or ``timeout`` passes).

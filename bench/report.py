@@ -479,6 +479,7 @@ def _markdown(meta: dict[str, Any], d: dict[str, list[dict[str, Any]]],
         ("section", "s", ""), ("run at", "date", ""), ("CPU", lambda r: r.get("cpu", "–"), ""),
         ("load before", lambda r: r["load_before"][0], ".2f"),
         ("load after", lambda r: r.get("load_after", [math.nan])[0], ".2f"),
+        ("Python loop (ms)", lambda r: 1e3 * r.get("python_loop_s", math.nan), ".0f"),
         ("seconds", "seconds", ".0f")]))
     add("")
 
