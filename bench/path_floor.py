@@ -13,8 +13,9 @@ each path traced to its end in one loop, Embree called from it, the state in reg
 nothing but two-sided Lambert, the scene's lights (triangles, or the map), NEE + MIS,
 four hero lanes and roulette (that module's docstring). What it spends outside Embree is
 what a scalar kernel must spend on these paths. :mod:`relray.core.render.lane_paths`
-computes the same estimator sixteen paths at a time in SIMD lanes, with Embree's 16-ray
-packets; the renderer runs it on the static scenes (the Cornell box, the heavy scene,
+computes the same estimator sixteen paths at a time in SIMD lanes, a packet of sixteen
+rays per bounce (traced by Embree one ray at a time, ``embree.intersect_lanes``); the
+renderer runs it on the static scenes (the Cornell box, the heavy scene,
 the environment-lit scene).
 
 Measured in one process, on the same camera rays, keys and hero lanes (relray's camera
@@ -28,10 +29,13 @@ alternated, thread CPU time per path:
   then traced again by ``embree.intersect_rays`` / ``occluded_rays`` in the same order;
   with moving bodies the rest-frame traversal of those rays, :func:`embree_replay`);
 - *numbers*: the random numbers alone that those paths draw (:func:`draw_numbers`);
-- where the lanes apply, *lanes*: ``lane_paths.lane_trace``, and *Embree16*: Embree
-  alone on the lane kernel's own packets (recorded in one more run, then traced again by
-  ``rtcIntersect16``/``rtcOccluded16`` in the same order, :func:`replay_packets`); the
-  lane kernel's work outside Embree is *lanes* − *Embree16*.
+- where the lanes apply, *lanes*: ``lane_paths.lane_trace``; *Embree (lanes)*: Embree
+  alone on the lane kernel's own packets (recorded in one more run, then traced again in
+  the same order by the lanes' queries, ``embree.intersect_lanes``/``occluded_lanes``:
+  ``rtcIntersect1`` per ray, :func:`replay_packets`), and *Embree16*: the same packets by
+  Embree's packet queries ``rtcIntersect16``/``rtcOccluded16`` (what the lanes traced
+  with until 2026-11-27); the lane kernel's work outside Embree is *lanes* − *Embree
+  (lanes)*.
 
 The whole-path kernel's work outside Embree is *whole paths* − *Embree*. The two
 integrators compute the same radiance with the same random numbers: the mean of each
@@ -64,8 +68,10 @@ from relray.core.render.embree import (
     PACKET,
     TFAR,
     intersect16,
+    intersect_lanes,
     intersect_rays,
     occluded16,
+    occluded_lanes,
     occluded_rays,
     packet_buffers,
     set_packet_ray,
@@ -114,11 +120,13 @@ def draw_numbers(keys, bounces):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def replay_packets(scene, log_hit, log_shadow, log_valid, n):  # pragma: no cover - compiled
+def replay_packets(scene, log_hit, log_shadow, log_valid, n,
+                   by_ray):  # pragma: no cover - compiled
     """Embree alone on the lane kernel's packets (``lane_paths.packet_log``, the first
     ``n``): each nearest-hit packet and each shadow packet traced again, in order, with
-    the valid words they were traced with. Returns the hits found (so that nothing is
-    left out)."""
+    the valid words they were traced with, ``by_ray`` as the lanes trace them (one
+    ``rtcIntersect1`` a ray) or else by Embree's 16-ray packet queries. Returns the hits
+    found (so that nothing is left out)."""
     W = PACKET
     hit, f, valid = packet_buffers()
     found = 0
@@ -130,8 +138,12 @@ def replay_packets(scene, log_hit, log_shadow, log_valid, n):  # pragma: no cove
                                log[k, 3, lane], log[k, 4, lane], log[k, 5, lane],
                                log_shadow[k, 6, lane] if shadow else MISS_DISTANCE)
                 valid[lane] = log_valid[k, shadow, lane]
-            if shadow:
+            if shadow and by_ray:
+                occluded_lanes(scene, valid, hit)
+            elif shadow:
                 occluded16(scene, valid, hit)
+            elif by_ray:
+                intersect_lanes(scene, valid, hit)
             else:
                 intersect16(scene, valid, hit)
             for lane in range(W):
@@ -250,15 +262,16 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
                                               first_t, log=plog)
         lanes_row = {"lanes_paths_differing": whole_paths.paths_differing(L2, whole_l),
                      "lanes_per_packet": n_rays / packets}
-        times.update(lanes=[], embree16=[])
+        times.update(lanes=[], embree_lanes=[], embree16=[])
     for _ in range(reps):
         if lanes:
             t0 = time.thread_time()
             lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2, first_t)
             times["lanes"].append(time.thread_time() - t0)
-            t0 = time.thread_time()
-            replay_packets(prep.tracer.handle, *plog, packets)
-            times["embree16"].append(time.thread_time() - t0)
+            for by_ray, name in ((True, "embree_lanes"), (False, "embree16")):
+                t0 = time.thread_time()
+                replay_packets(prep.tracer.handle, *plog, packets, by_ray)
+                times[name].append(time.thread_time() - t0)
         times["wavefront"].append(run_wavefront()[0])
         t0 = time.thread_time()
         run_whole(False)
@@ -287,15 +300,18 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
 
 def lanes_columns(ns: dict[str, float], row: dict[str, Any]) -> dict[str, Any]:
     """:func:`measure`'s SIMD-lane columns (NaN where the lanes do not apply): the lane
-    kernel's CPU per path, Embree alone on its packets, the rest, Embree's share, the
-    lanes ÷ whole paths and the lanes' agreement with whole paths."""
+    kernel's CPU per path, Embree alone on its packets (as the lanes trace them, and as
+    16-ray packet queries), the rest, Embree's share, the lanes ÷ whole paths and the
+    lanes' agreement with whole paths."""
     if "lanes" not in ns:
-        return {k: float("nan") for k in ("lanes_ns", "embree16_ns", "lanes_other_ns",
-                                          "lanes_embree_share", "lanes_over_whole",
-                                          "lanes_paths_differing", "lanes_per_packet")}
-    return {"lanes_ns": ns["lanes"], "embree16_ns": ns["embree16"],
-            "lanes_other_ns": ns["lanes"] - ns["embree16"],
-            "lanes_embree_share": ns["embree16"] / ns["lanes"],
+        return {k: float("nan") for k in ("lanes_ns", "embree_lanes_ns", "embree16_ns",
+                                          "lanes_other_ns", "lanes_embree_share",
+                                          "lanes_over_whole", "lanes_paths_differing",
+                                          "lanes_per_packet")}
+    return {"lanes_ns": ns["lanes"], "embree_lanes_ns": ns["embree_lanes"],
+            "embree16_ns": ns["embree16"],
+            "lanes_other_ns": ns["lanes"] - ns["embree_lanes"],
+            "lanes_embree_share": ns["embree_lanes"] / ns["lanes"],
             "lanes_over_whole": ns["lanes"] / ns["whole"], **row}
 
 

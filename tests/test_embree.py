@@ -90,35 +90,46 @@ def test_robust_scenes_and_bad_input():
             embree.TriangleScene(bad)
 
 
-@njit(cache=True)
-def _packets(scene, o, d, lengths, valid_lanes, t, prim, blocked):
-    """embree.intersect16/occluded16 over the rays, 16 to a packet, lane l of each
-    packet traced only where ``valid_lanes[l]``."""
-    W = embree.PACKET
-    hit, f, valid = embree.packet_buffers()
-    for start in range(0, o.shape[0], W):
-        for occl in range(2):
-            for lane in range(W):
-                i = min(start + lane, o.shape[0] - 1)
-                embree.set_packet_ray(f, hit, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
-                                      d[i, 1], d[i, 2], lengths[i] if occl else 1e30)
-                valid[lane] = -1 if valid_lanes[lane] and start + lane < o.shape[0] else 0
-            if occl:
-                embree.occluded16(scene, valid, hit)
-            else:
-                embree.intersect16(scene, valid, hit)
-            for lane in range(min(W, o.shape[0] - start)):
-                i = start + lane
+def _packet_tracer(by_ray: bool):
+    """A kernel that traces the rays 16 to a packet, lane l of each packet only where
+    ``valid_lanes[l]``: by ``embree.intersect16``/``occluded16`` (Embree's packet
+    queries), or by ``intersect_lanes``/``occluded_lanes`` (the same packets ray by ray:
+    what the SIMD lanes call)."""
+    nearest = embree.intersect_lanes if by_ray else embree.intersect16
+    blocked_by = embree.occluded_lanes if by_ray else embree.occluded16
+
+    @njit
+    def trace(scene, o, d, lengths, valid_lanes, t, prim, blocked):
+        W = embree.PACKET
+        hit, f, valid = embree.packet_buffers()
+        for start in range(0, o.shape[0], W):
+            for occl in range(2):
+                for lane in range(W):
+                    i = min(start + lane, o.shape[0] - 1)
+                    embree.set_packet_ray(f, hit, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0],
+                                          d[i, 1], d[i, 2], lengths[i] if occl else 1e30)
+                    valid[lane] = -1 if valid_lanes[lane] and start + lane < o.shape[0] else 0
                 if occl:
-                    blocked[i] = f[embree.TFAR * W + lane] < 0.0
-                elif hit[embree.GEOM * W + lane] != 0xFFFFFFFF:
-                    t[i], prim[i] = f[embree.TFAR * W + lane], hit[embree.PRIM * W + lane]
+                    blocked_by(scene, valid, hit)
+                else:
+                    nearest(scene, valid, hit)
+                for lane in range(min(W, o.shape[0] - start)):
+                    i = start + lane
+                    if occl:
+                        blocked[i] = f[embree.TFAR * W + lane] < 0.0
+                    elif hit[embree.GEOM * W + lane] != 0xFFFFFFFF:
+                        t[i], prim[i] = f[embree.TFAR * W + lane], hit[embree.PRIM * W + lane]
+
+    return trace
 
 
-def test_packets_of_sixteen_give_the_single_rays_answers_in_their_valid_lanes():
-    """intersect16/occluded16 (core/render/lane_paths.py's queries): the same nearest
-    hits and occlusion as intersect1/occluded1, ray by ray, in the lanes marked valid;
-    the lanes left out are not traced (their words unchanged: no hit, not blocked)."""
+@pytest.mark.parametrize("by_ray", [False, True], ids=["packets", "lane_by_lane"])
+def test_packets_of_sixteen_give_the_single_rays_answers_in_their_valid_lanes(by_ray):
+    """intersect16/occluded16 (Embree's packets) and intersect_lanes/occluded_lanes (the
+    SIMD lanes' queries, core/render/lane_paths.py): the same nearest hits and occlusion
+    as intersect1/occluded1, ray by ray, in the lanes marked valid; the lanes left out
+    are not traced (their words unchanged: no hit, not blocked). Lane by lane it is
+    rtcIntersect1 itself: bit for bit."""
     rng = np.random.default_rng(11)
     tris = rng.uniform(-1.0, 1.0, (200, 3, 3)).astype(np.float32)
     scene = embree.TriangleScene(tris)
@@ -138,12 +149,17 @@ def test_packets_of_sixteen_give_the_single_rays_answers_in_their_valid_lanes():
     valid_lanes[[3, 10]] = False
     t2, p2 = np.full(n, 1e30, np.float32), np.full(n, -1, np.int32)
     b2 = np.zeros(n, np.bool_)
-    _packets(scene.handle, o, d, lengths, valid_lanes, t2, p2, b2)
+    _packet_tracer(by_ray)(scene.handle, o, d, lengths, valid_lanes, t2, p2, b2)
     traced = valid_lanes[np.arange(n) % 16]
     assert 0.3 < (p1 >= 0).mean() < 0.95 and 0.1 < b1.mean() < 0.9
+    assert np.all(p2[~traced] == -1) and not np.any(b2[~traced])
+    if by_ray:
+        np.testing.assert_array_equal(p2[traced], p1[traced])
+        np.testing.assert_array_equal(t2[traced], t1[traced])
+        np.testing.assert_array_equal(b2[traced], b1[traced])
+        return
     # Embree's packet and single-ray kernels are different code: on another CPU a ray
     # within float32 rounding of an edge may take the other side (a tolerance, not bits)
     same = p2[traced] == p1[traced]
     assert same.mean() > 0.995 and (b2[traced] == b1[traced]).mean() > 0.995
     np.testing.assert_allclose(t2[traced][same], t1[traced][same], rtol=1e-5)
-    assert np.all(p2[~traced] == -1) and not np.any(b2[~traced])

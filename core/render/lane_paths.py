@@ -3,25 +3,27 @@
 :mod:`.whole_paths` traces one path at a time, so its shading is scalar code and every
 ray an ``rtcIntersect1``/``rtcOccluded1``. Here sixteen paths share one loop: each lane
 holds a path's state (structure of arrays, one row per quantity, one column per lane),
-every bounce of the sixteen is one ``rtcIntersect16`` packet, their shading a few loops
-over the lanes that LLVM compiles to vector code for the machine it runs on (on this
-AVX-512 machine 16-lane zmm code: gathers from the scene's tables, the Sobol numbers'
-integer hashing, the light sample, the cosine warp; branch-free, a lane's decisions are
-selects and masks), their shadow rays one
-``rtcOccluded16`` packet; a lane whose path has ended takes the next camera ray from the
-queue before the next packet. This is what Mitsuba 3's LLVM variant does with its
-JIT-compiled kernels, written out by hand for the scenes where it pays
-(:func:`applies`): static, Lambert, flat or smooth-shaded, lit by emissive triangles,
-point, spot and sun lights, a constant sky or a colour environment map, with or without
-image textures. Image textures (base colour, roughness, normal, emission) are a lane loop
-of their own (:func:`texture_lanes`: scalar calls per lane), so the other loops stay
-vector code. The environment map's lookups are vector code: the escaping rays' (u, v)
-by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the light samples' directions by
-:func:`.sampling.sincos_2pi`, the texels' spectra from their coefficient rows gathered
-into the stack first (:func:`texel_rows`, :func:`texel_values`: a loop that gathers the
-rows and evaluates the sigmoids at once was left scalar by LLVM and cost 2–3× as much);
-the light samples' texels come from the sampler's guided searches, a short scalar loop
-(:func:`pick_texels`).
+every bounce of the sixteen is one packet of rays, their shading a few loops over the
+lanes that LLVM compiles to vector code for the machine it runs on (on this AVX-512
+machine 16-lane zmm code: gathers from the scene's tables, the Sobol numbers' integer
+hashing, the light sample, the cosine warp; branch-free, a lane's decisions are selects
+and masks), their shadow rays another packet; a lane whose path has ended takes the next
+camera ray from the queue before the next packet. Embree traces a packet's rays one at a
+time (:func:`.embree.intersect_lanes`: ``rtcIntersect1`` on each lane): on rays as
+incoherent as these, its single-ray traversal costs less than its 16-wide
+``rtcIntersect16`` (about two thirds of the time on the Cornell box). The shading is
+what Mitsuba 3's LLVM variant does with its JIT-compiled kernels, written out by hand
+for the scenes where it pays (:func:`applies`): static, Lambert, flat or smooth-shaded,
+lit by emissive triangles, point, spot and sun lights, a constant sky or a colour
+environment map, with or without image textures. Image textures (base colour, roughness,
+normal, emission) are a lane loop of their own (:func:`texture_lanes`: scalar calls per
+lane), so the other loops stay vector code. The environment map's lookups are vector
+code: the escaping rays' (u, v) by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the
+light samples' directions by :func:`.sampling.sincos_2pi`, the texels' spectra from
+their coefficient rows gathered into the stack first (:func:`texel_rows`,
+:func:`texel_values`: a loop that gathers the rows and evaluates the sigmoids at once
+was left scalar by LLVM and cost 2–3× as much); the light samples' texels come from the
+sampler's guided searches, a short scalar loop (:func:`pick_texels`).
 
 What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
 (:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
@@ -43,7 +45,7 @@ cosine-weighted about the shading normal n (refused below the geometric normal g
 throughput × ρ(λ); Russian roulette from ``integrator.RR_DEPTH`` on the lanes' largest
 throughput. ``tests/test_lane_paths.py`` checks path by path that the lanes, the
 whole-path kernel and the wavefront integrator give the same radiance;
-``bench/path_floor.py`` measures the lanes against Embree alone on their packets.
+``bench/path_floor.py`` measures the lanes against Embree alone on their rays.
 """
 
 from __future__ import annotations
@@ -68,8 +70,8 @@ from .embree import (
     PACKET_WORDS,
     PRIM,
     TFAR,
-    intersect16,
-    occluded16,
+    intersect_lanes,
+    occluded_lanes,
     set_packet_ray,
 )
 from .environment import (
@@ -751,7 +753,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
                 for c in range(6):
                     for lane in range(W):
                         log_hit[packets, c, lane] = ray[c, lane]
-            intersect16(handle, valid, hit)
+            intersect_lanes(handle, valid, hit)
             # the hits' records on their way from memory while the numbers are drawn
             prefetch_hits(tri_rec, path, hit)
             bounce_numbers(key, depth, ua, ub)
@@ -781,7 +783,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
                     log_valid[packets, 0, lane] = valid[lane]
                     log_valid[packets, 1, lane] = svalid[lane]
             packets += 1
-            occluded16(handle, svalid, shadow)
+            occluded_lanes(handle, svalid, shadow)
             add_unblocked(shadowf, svalid, nee, acc)
             # the paths that ended give their radiance and, from the camera ray, its distance
             for lane in range(W):
