@@ -221,8 +221,9 @@ def intersect_lanes(scene, valid, packet):  # pragma: no cover - compiled
     packet query. Bit for bit what :func:`intersect1` gives each ray.
 
     On the SIMD lanes' rays (incoherent after the first bounce) Embree's single-ray
-    traversal costs less than its 16-wide packet traversal: Embree alone on the Cornell
-    box's lane rays about two thirds of the packets' time (``bench/path_floor.py``)."""
+    traversal costs a little less than its 16-wide packet traversal: Embree alone on the
+    Cornell box's lane packets 591 ns per path ray by ray against 617 as packets
+    (``bench/path_floor.py``, 2026-11-27), and the lane kernel a few per cent less."""
     one = stack_array(1, 32, np.uint32)[0]
     addr = one.ctypes.data
     W = PACKET

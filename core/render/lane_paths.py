@@ -10,16 +10,16 @@ hashing, the light sample, the cosine warp; branch-free, a lane's decisions are 
 and masks), their shadow rays another packet; a lane whose path has ended takes the next
 camera ray from the queue before the next packet. Embree traces a packet's rays one at a
 time (:func:`.embree.intersect_lanes`: ``rtcIntersect1`` on each lane): on rays as
-incoherent as these, its single-ray traversal costs less than its 16-wide
-``rtcIntersect16`` (about two thirds of the time on the Cornell box). The shading is
-what Mitsuba 3's LLVM variant does with its JIT-compiled kernels, written out by hand
-for the scenes where it pays (:func:`applies`): static, Lambert, flat or smooth-shaded,
-lit by emissive triangles, point, spot and sun lights, a constant sky or a colour
-environment map, with or without image textures. Image textures (base colour, roughness,
-normal, emission) are a lane loop of their own (:func:`texture_lanes`: scalar calls per
-lane), so the other loops stay vector code. The environment map's lookups are vector
-code: the escaping rays' (u, v) by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the
-light samples' directions by :func:`.sampling.sincos_2pi`, the texels' spectra from
+incoherent as these, its single-ray traversal costs a little less than its 16-wide
+``rtcIntersect16``, and the answers are bit for bit those of the whole paths' rays. The
+shading is what Mitsuba 3's LLVM variant does with its JIT-compiled kernels, written out
+by hand for the scenes where it pays (:func:`applies`): static, Lambert, flat or
+smooth-shaded, lit by emissive triangles, point, spot and sun lights, a constant sky or
+a colour environment map, with or without image textures. Image textures (base colour,
+roughness, normal, emission) are a lane loop of their own (:func:`texture_lanes`: scalar
+calls per lane), so the other loops stay vector code. The environment map's lookups are
+vector code: the escaping rays' (u, v) by polynomial ``acos``/``atan2`` (:mod:`.arcs`),
+the light samples' directions by :func:`.sampling.sincos_2pi`, the texels' spectra from
 their coefficient rows gathered into the stack first (:func:`texel_rows`,
 :func:`texel_values`: a loop that gathers the rows and evaluates the sigmoids at once
 was left scalar by LLVM and cost 2–3× as much); the light samples' texels come from the
