@@ -73,6 +73,18 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def cpu_isa() -> str:
+    """The widest vector instructions of the CPU the kernels are compiled for (LLVM's
+    host features): "AVX-512", "AVX2" or "SSE". The cloud gives machines of either kind,
+    both "AMD EPYC"; the SIMD lanes' code differs between them."""
+    from llvmlite import binding as llvm
+
+    features = llvm.get_host_cpu_features()
+    if features.get("avx512f", False):
+        return "AVX-512"
+    return "AVX2" if features.get("avx2", False) else "SSE"
+
+
 def package_version(name: str) -> str:
     """Installed version of a distribution, or '-'."""
     from importlib import metadata

@@ -14,7 +14,7 @@ nothing but two-sided Lambert, the scene's lights (triangles, or the map), NEE +
 four hero lanes and roulette (that module's docstring). What it spends outside Embree is
 what a scalar kernel must spend on these paths. :mod:`relray.core.render.lane_paths`
 computes the same estimator sixteen paths at a time in SIMD lanes, a packet of sixteen
-rays per bounce (traced by Embree one ray at a time, ``embree.intersect_lanes``); the
+rays per bounce (Embree's packet query on AVX-512, else one ray at a time); the
 renderer runs it on the static scenes (the Cornell box, the heavy scene,
 the environment-lit scene).
 
@@ -29,13 +29,13 @@ alternated, thread CPU time per path:
   then traced again by ``embree.intersect_rays`` / ``occluded_rays`` in the same order;
   with moving bodies the rest-frame traversal of those rays, :func:`embree_replay`);
 - *numbers*: the random numbers alone that those paths draw (:func:`draw_numbers`);
-- where the lanes apply, *lanes*: ``lane_paths.lane_trace``; *Embree (lanes)*: Embree
-  alone on the lane kernel's own packets (recorded in one more run, then traced again in
-  the same order by the lanes' queries, ``embree.intersect_lanes``/``occluded_lanes``:
-  ``rtcIntersect1`` per ray, :func:`replay_packets`), and *Embree16*: the same packets by
-  Embree's packet queries ``rtcIntersect16``/``rtcOccluded16`` (what the lanes traced
-  with until 2026-11-27); the lane kernel's work outside Embree is *lanes* − *Embree
-  (lanes)*.
+- where the lanes apply, *lanes*: ``lane_paths.lane_trace``; Embree alone on the lane
+  kernel's own packets (recorded in one more run, then traced again in the same order,
+  :func:`replay_packets`) both ways: *Embree1* ray by ray (``embree.intersect_lanes``/
+  ``occluded_lanes``: ``rtcIntersect1``), *Embree16* by Embree's packet queries
+  (``rtcIntersect16``/``rtcOccluded16``); *Embree (lanes)* is the one the lanes use on
+  this machine (``lane_paths.PACKETS``: packets on AVX-512), and the lane kernel's work
+  outside Embree is *lanes* − *Embree (lanes)*.
 
 The whole-path kernel's work outside Embree is *whole paths* − *Embree*. The two
 integrators compute the same radiance with the same random numbers: the mean of each
@@ -262,13 +262,13 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
                                               first_t, log=plog)
         lanes_row = {"lanes_paths_differing": whole_paths.paths_differing(L2, whole_l),
                      "lanes_per_packet": n_rays / packets}
-        times.update(lanes=[], embree_lanes=[], embree16=[])
+        times.update(lanes=[], embree1=[], embree16=[])
     for _ in range(reps):
         if lanes:
             t0 = time.thread_time()
             lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2, first_t)
             times["lanes"].append(time.thread_time() - t0)
-            for by_ray, name in ((True, "embree_lanes"), (False, "embree16")):
+            for by_ray, name in ((True, "embree1"), (False, "embree16")):
                 t0 = time.thread_time()
                 replay_packets(prep.tracer.handle, *plog, packets, by_ray)
                 times[name].append(time.thread_time() - t0)
@@ -300,18 +300,20 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
 
 def lanes_columns(ns: dict[str, float], row: dict[str, Any]) -> dict[str, Any]:
     """:func:`measure`'s SIMD-lane columns (NaN where the lanes do not apply): the lane
-    kernel's CPU per path, Embree alone on its packets (as the lanes trace them, and as
-    16-ray packet queries), the rest, Embree's share, the lanes ÷ whole paths and the
-    lanes' agreement with whole paths."""
+    kernel's CPU per path, Embree alone on its packets (ray by ray, as 16-ray packet
+    queries, and whichever of the two the lanes use here: ``lane_paths.PACKETS``), the
+    rest, Embree's share, the lanes ÷ whole paths and the lanes' agreement with whole
+    paths."""
     if "lanes" not in ns:
-        return {k: float("nan") for k in ("lanes_ns", "embree_lanes_ns", "embree16_ns",
-                                          "lanes_other_ns", "lanes_embree_share",
-                                          "lanes_over_whole", "lanes_paths_differing",
-                                          "lanes_per_packet")}
-    return {"lanes_ns": ns["lanes"], "embree_lanes_ns": ns["embree_lanes"],
+        return {k: float("nan") for k in ("lanes_ns", "embree_lanes_ns", "embree1_ns",
+                                          "embree16_ns", "lanes_other_ns",
+                                          "lanes_embree_share", "lanes_over_whole",
+                                          "lanes_paths_differing", "lanes_per_packet")}
+    own = ns["embree16"] if lane_paths.PACKETS else ns["embree1"]
+    return {"lanes_ns": ns["lanes"], "embree_lanes_ns": own, "embree1_ns": ns["embree1"],
             "embree16_ns": ns["embree16"],
-            "lanes_other_ns": ns["lanes"] - ns["embree_lanes"],
-            "lanes_embree_share": ns["embree_lanes"] / ns["lanes"],
+            "lanes_other_ns": ns["lanes"] - own,
+            "lanes_embree_share": own / ns["lanes"],
             "lanes_over_whole": ns["lanes"] / ns["whole"], **row}
 
 

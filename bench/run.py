@@ -170,7 +170,7 @@ def run(plan: Plan, out: Path, md: Path | None, sections: tuple[str, ...] = SECT
     def section(name: str):
         meta["sections"][name] = {"load_before": cm.load_average(), "t0": time.perf_counter(),
                                   "date": time.strftime("%Y-%m-%d %H:%M"),
-                                  "cpu": cm.cpu_model(),
+                                  "cpu": f"{cm.cpu_model()} ({cm.cpu_isa()})",
                                   "python_loop_s": cm.interpreter_seconds()}
         log(f"[{name}] load {cm.load_average()[0]:.2f}")
 

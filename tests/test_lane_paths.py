@@ -212,6 +212,26 @@ def test_fewer_paths_than_lanes(tmp_path, n):
     assert distances_differing(t1, t2) == 0.0 and packets >= 1
 
 
+def test_packets_and_rays_one_at_a_time_trace_the_same_paths(tmp_path):
+    """The lanes' rays as Embree's 16-ray packets (``lane_paths.PACKETS``: AVX-512) or one
+    at a time (elsewhere): whatever this machine is, both kernels trace the same paths
+    (Embree's packet and single-ray kernels agree but for rounding)."""
+    fr, ev = renderer(lane_scene("everything", "cie1931", 0.3), tmp_path)
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
+    n, depth = len(keys), fr.settings.max_depth
+    out = []
+    for native16 in (True, False):
+        L, t = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32)
+        rays = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu, nlanes,
+                                     depth, L, t, native16=native16)
+        out.append((L, t, rays))
+    (l16, t16, r16), (l1, t1, r1) = out
+    assert np.all(np.isfinite(l16)) and np.all(np.isfinite(l1)) and l1.sum() > 0.0
+    assert whole_paths.paths_differing(l16, l1) <= 0.005
+    assert distances_differing(t16, t1) <= 0.005
+    assert abs(r16[0] - r1[0]) <= 0.005 * r1[0] and abs(r16[1] - r1[1]) <= 0.005 * r1[1] + 1
+
+
 def test_depth_one_sees_the_emitters_only(tmp_path):
     """max_depth 1: the camera rays' hits and no bounce, so no shadow ray, and radiance
     only where a camera ray meets the light."""

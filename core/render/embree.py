@@ -206,6 +206,22 @@ def occluded16(scene, valid, packet):  # pragma: no cover - compiled
     _rtc_occluded16(valid.ctypes.data, scene, packet.ctypes.data, 0)
 
 
+def native_packets() -> bool:
+    """Whether Embree runs its 16-ray packet queries natively here: the CPU that LLVM
+    compiles the kernels for has AVX-512 (F, CD, DQ, BW, VL: Embree's AVX512 kernels).
+    Elsewhere (AVX2) Embree emulates ``rtcIntersect16`` with narrower packets, and the
+    SIMD lanes trace their rays one at a time instead (:func:`intersect_lanes`).
+
+    Measured (Embree alone on recorded rays, ``bench/path_floor.py``, ns per Cornell
+    path): on AVX2 (2026-11-27 22:40) the lanes' packets cost 542 ray by ray against 578
+    as packets, the heavy scene's 1028 against 1106; on AVX-512 (2026-11-27 19:01) the
+    lanes' packets cost 312 as packets against 363 for the whole paths' rays one at a
+    time, the heavy scene's 639 against 750."""
+    features = llvm.get_host_cpu_features()
+    return all(features.get(f, False) for f in ("avx512f", "avx512cd", "avx512dq",
+                                                 "avx512bw", "avx512vl"))
+
+
 #: the 32-bit words of a lane's ray in a packet (origin, tnear, direction, time, tfar,
 #: mask, id, flags) and of its hit (Ng, u, v, primID, geomID)
 _RAY_WORDS = 12
@@ -220,10 +236,9 @@ def intersect_lanes(scene, valid, packet):  # pragma: no cover - compiled
     only geomID (``RTC_INVALID_GEOMETRY_ID``) and tfar (unchanged) count, as with the
     packet query. Bit for bit what :func:`intersect1` gives each ray.
 
-    On the SIMD lanes' rays (incoherent after the first bounce) Embree's single-ray
-    traversal costs a little less than its 16-wide packet traversal: Embree alone on the
-    Cornell box's lane packets 591 ns per path ray by ray against 617 as packets
-    (``bench/path_floor.py``, 2026-11-27), and the lane kernel a few per cent less."""
+    What the SIMD lanes call where Embree has no native 16-ray packets
+    (:func:`native_packets`): there its single-ray traversal costs less on the lanes'
+    rays than its emulated packets."""
     one = stack_array(1, 32, np.uint32)[0]
     addr = one.ctypes.data
     W = PACKET

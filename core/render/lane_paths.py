@@ -9,9 +9,9 @@ machine 16-lane zmm code: gathers from the scene's tables, the Sobol numbers' in
 hashing, the light sample, the cosine warp; branch-free, a lane's decisions are selects
 and masks), their shadow rays another packet; a lane whose path has ended takes the next
 camera ray from the queue before the next packet. Embree traces a packet's rays one at a
-time (:func:`.embree.intersect_lanes`: ``rtcIntersect1`` on each lane): on rays as
-incoherent as these, its single-ray traversal costs a little less than its 16-wide
-``rtcIntersect16``, and the answers are bit for bit those of the whole paths' rays. The
+time where it has no native 16-ray packets (AVX2: :func:`.embree.intersect_lanes`,
+``rtcIntersect1`` on each lane, a little cheaper there than its emulated packets), as
+one ``rtcIntersect16`` where it has (AVX-512: :data:`PACKETS`). The
 shading is what Mitsuba 3's LLVM variant does with its JIT-compiled kernels, written out
 by hand for the scenes where it pays (:func:`applies`): static, Lambert, flat or
 smooth-shaded, lit by emissive triangles, point, spot and sun lights, a constant sky or
@@ -70,7 +70,10 @@ from .embree import (
     PACKET_WORDS,
     PRIM,
     TFAR,
+    intersect16,
     intersect_lanes,
+    native_packets,
+    occluded16,
     occluded_lanes,
     set_packet_ray,
 )
@@ -610,13 +613,15 @@ def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
             acc[j, lane] += nee[j, lane] if seen else 0.0
 
 
-def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
+def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
+             native16: bool) -> Any:
     """The lane kernel for one kind of scene (:func:`kernel`): ``smooth`` vertex normals,
     ``lights`` emissive triangles only (:data:`TRIANGLE_LIGHTS`), other lights too (point,
     spot, sun, the constant sky, the map: :data:`ANY_LIGHTS`) or the map alone
     (:data:`MAP_LIGHT`), ``textured`` image textures (:func:`texture_lanes`), ``env_on`` an
-    environment map (:func:`env_misses`, :func:`pick_texels`). The four are constants of
-    the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
+    environment map (:func:`env_misses`, :func:`pick_texels`), ``native16`` the rays
+    as Embree's 16-ray packets (else one at a time: :data:`PACKETS`). The five are
+    constants of the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
     carry no normal interpolation, no light kinds it does not have and no texture lookups
     (numba's on-disk cache keys each variant by its closure's values)."""
 
@@ -753,7 +758,10 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
                 for c in range(6):
                     for lane in range(W):
                         log_hit[packets, c, lane] = ray[c, lane]
-            intersect_lanes(handle, valid, hit)
+            if native16:
+                intersect16(handle, valid, hit)
+            else:
+                intersect_lanes(handle, valid, hit)
             # the hits' records on their way from memory while the numbers are drawn
             prefetch_hits(tri_rec, path, hit)
             bounce_numbers(key, depth, ua, ub)
@@ -783,7 +791,10 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool) -> Any:
                     log_valid[packets, 0, lane] = valid[lane]
                     log_valid[packets, 1, lane] = svalid[lane]
             packets += 1
-            occluded_lanes(handle, svalid, shadow)
+            if native16:
+                occluded16(handle, svalid, shadow)
+            else:
+                occluded_lanes(handle, svalid, shadow)
             add_unblocked(shadowf, svalid, nee, acc)
             # the paths that ended give their radiance and, from the camera ray, its distance
             for lane in range(W):
@@ -821,17 +832,24 @@ def kind(sc: KernelScene) -> tuple[bool, int, bool, bool]:
     return bool(sc.has_vn), light_kind(sc), bool(sc.tex.enabled), bool(sc.env_on)
 
 
-#: the compiled variants, by (smooth, lights, textured, map) (:func:`kernel`)
-_KERNELS: dict[tuple[bool, int, bool, bool], Any] = {}
+#: Embree's 16-ray packet queries for the lanes' rays (AVX-512), or one ray at a time
+#: (:func:`.embree.native_packets`): a constant of the machine, and of the compiled code
+PACKETS = native_packets()
+#: the compiled variants, by (smooth, lights, textured, map, packets) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, int, bool, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def kernel(smooth: bool, lights: int, textured: bool = False, env_on: bool = False) -> Any:
+def kernel(smooth: bool, lights: int, textured: bool = False, env_on: bool = False,
+           native16: bool | None = None) -> Any:
     """The lane kernel for scenes with or without vertex normals, with emissive
     triangles, any lights or the map alone (:func:`light_kind`), with or without image
     textures, with or without a colour environment map (:func:`_compile`); made once per
-    kind, also when several render threads ask for it at once."""
-    key = (bool(smooth), int(lights), bool(textured), bool(env_on))
+    kind, also when several render threads ask for it at once. Its rays go to Embree as
+    16-ray packets where Embree runs them natively (:data:`PACKETS`; ``native16``
+    chooses), else one at a time."""
+    key = (bool(smooth), int(lights), bool(textured), bool(env_on),
+           PACKETS if native16 is None else bool(native16))
     with _KERNELS_LOCK:
         if key not in _KERNELS:
             _KERNELS[key] = _compile(*key)
@@ -856,7 +874,8 @@ def packet_log(n_paths: int, max_depth: int) -> tuple:
 def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
                d: np.ndarray, lamu: np.ndarray, nlanes: int, max_depth: int, L: np.ndarray,
                first_t: np.ndarray, sky_seen: bool = True, log: tuple | None = None,
-               spread: np.ndarray | float = 0.0) -> tuple[int, int, int]:
+               spread: np.ndarray | float = 0.0,
+               native16: bool | None = None) -> tuple[int, int, int]:
     """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
     ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
     its end through the scene ``sc`` (where :func:`applies`), sixteen at a time: its lab
@@ -864,8 +883,10 @@ def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
     ray's hit distance into ``first_t[i]`` (1e30: none). ``log`` (benchmarks,
     :func:`packet_log`): every packet's rays. With textures, ``spread`` ((N,) or one for
     all) is the camera rays' lab spread angle, the start of their ray cones
-    (:func:`.textures.lab_spread`). Returns (nearest-hit rays, shadow rays, packets)."""
-    run = kernel(*kind(sc))
+    (:func:`.textures.lab_spread`). ``native16``: the rays as Embree's 16-ray packets or
+    one at a time (None: :data:`PACKETS`). Returns (nearest-hit rays, shadow rays,
+    packets)."""
+    run = kernel(*kind(sc), native16=native16)
     return run(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
                sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind,
                sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
