@@ -429,14 +429,23 @@ def headline_12(d: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
     warm = [r for r in d["first_cli"] if r["case"] == "warm"]
     if warm:
         w = warm[0]
+        cold = [r["wall_s"] for r in d["first_cli"] if r["case"].startswith("cold")]
+        f12 = [r["f12_s"] for r in d["first_render"] if r["case"] == "cold, F12 at once"]
+        slower = (f" (§5c: the cold command line {cold[0]:.0f} s against 18.3 s at 18:54, "
+                  f"Blender's first F12 {f12[0]:.0f} s against 19.2 s, the same kernels)"
+                  if cold and f12 else "")
         rows.append({"goal": "first 1-spp Cornell image from `relray render`, warm kernel "
                              "cache (§5c)", "target": "≤ 1 s",
                      "measured": f"{w['wall_s']:.2f} s (imports {w['import_s']:.2f} s)",
                      "met": w["wall_s"] <= 1.0,
-                     "stops": "around the goal, not a floor: it swings with the machine "
-                              "(0.87–1.17 s in the runs of 2026-11-27, §5c), where importing numba "
-                              "and loading its typing registries at the first cached "
-                              "kernel take 0.45–1 s before relray works"})
+                     "stops": "the machine, not a floor: this run's ran everything about "
+                              f"twice as slowly as the earlier runs'{slower}; the round's "
+                              "garbage-collection change made the warm command line 0.66× "
+                              "in alternated pairs (the round's bullets), which would be "
+                              "about 0.74 s against the 1.12 s of 18:54: inferred, not "
+                              "measured on that machine. Importing numba and loading its "
+                              "registries at the first cached kernel take 0.45–1 s of it "
+                              "before relray works"})
     return rows
 
 
@@ -1750,9 +1759,11 @@ def _section_path_floor(add, d) -> None:
              ("lanes ÷ whole paths", "lanes_over_whole", ".2f"),
              ("Embree alone, on the whole-path kernel's rays (1 ray a query)", "embree_ns",
               ".0f"),
-             ("Embree alone, on the lane kernel's packets (as the lanes trace them: 1 ray "
-              "a query)", "embree_lanes_ns", ".0f"),
-             ("… the same packets as Embree's 16-ray queries", "embree16_ns", ".0f"),
+             ("Embree alone, on the lane kernel's packets (as the lanes trace them here)",
+              "embree_lanes_ns", ".0f"),
+             ("… of it, the packets ray by ray (`rtcIntersect1`)", "embree1_ns", ".0f"),
+             ("… of it, the packets as 16-ray queries (`rtcIntersect16`)", "embree16_ns",
+              ".0f"),
              ("whole-path kernel outside Embree", "whole_other_ns", ".0f"),
              ("**lane kernel outside Embree**", "lanes_other_ns", ".0f"),
              ("… the random numbers alone, one path at a time", "numbers_ns", ".0f"),
@@ -1784,8 +1795,8 @@ def _section_path_floor(add, d) -> None:
         e = by.get("environment", {})
         add(f"\nIn SIMD lanes a Cornell path costs {c['lanes_ns']:.0f} ns against "
             f"{c['whole_ns']:.0f} one path at a time ({c['lanes_over_whole']:.2f}×): Embree "
-            f"on the lanes' packets {_f(c.get('embree_lanes_ns'), '.0f')} ns, traced a ray "
-            f"at a time ({c['embree16_ns']:.0f} as Embree's 16-ray packet queries), against "
+            f"on the lanes' packets {_f(c.get('embree1_ns'), '.0f')} ns ray by ray and "
+            f"{c['embree16_ns']:.0f} as Embree's 16-ray packet queries, against "
             f"{c['embree_ns']:.0f} on the whole paths' rays, the shading "
             f"{c['lanes_other_ns']:.0f} ns against "
             f"{c['whole_other_ns']:.0f}. Embree's share of the lane kernel is "
@@ -1839,9 +1850,14 @@ def _floor_text(bound: list[float], target: float) -> str:
     if not bound:
         return "the rest-frame traversal of each body (§5b, §6)"
     above = [b > target for b in bound]
+    if not any(above):
+        return (f"not a floor: the rest-frame traversal of each body alone bounds it at "
+                f"{_pair(bound)}, under the goal; the rest is the whole paths' work outside "
+                "the traversal (§6, the moving scene's floor; next step 2, SIMD lanes for "
+                "moving bodies)")
     where = ("" if all(above) else " (above the goal at the "
              + ("high" if above[0] else "low") + " level only)")
-    return (("**floor**: " if any(above) else "")
+    return ("**floor**: "
             + f"the rest-frame traversal of each body alone bounds it at {_pair(bound)}"
             + where + " (§6, the moving scene's floor)")
 
@@ -1994,6 +2010,67 @@ def peer_ratios(d, scene: str) -> tuple[dict, str]:
                            ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
         if (peer, 0) in ratio and (peer, 1) in ratio)
     return ratio, text
+
+
+def _lane_rays_bullet(add, d) -> None:
+    """The 2026-11-27 late round: the lanes' rays traced one at a time, the first image's
+    garbage collection, and what was measured and dropped."""
+    pf = {r["scene"]: r for r in d["path_floor"]}
+    c = pf.get("cornell", {})
+    replay = (f" (§6's run: {c['embree_lanes_ns']:.0f} against {c['embree16_ns']:.0f})"
+              if _num(c.get("embree_lanes_ns")) and _num(c.get("embree16_ns")) else "")
+    add("- **The lanes' rays one at a time** (`render/embree.py`, `render/lane_paths.py`, "
+        "2026-11-27 21:45–23:25): the lanes traced each bounce's sixteen rays by "
+        "`rtcIntersect16`/`rtcOccluded16`; on AVX2, Embree now traces them one at a time by "
+        "`rtcIntersect1`/`rtcOccluded1` (`embree.intersect_lanes`, `occluded_lanes`: each "
+        "valid lane's ray copied into one `RTCRayHit` on the kernel's stack and its hit "
+        "copied back), with the packet layout and the vector shading unchanged. Embree "
+        "alone on the Cornell lanes' recorded packets costs 591 ns per path ray by ray "
+        f"against 617 as 16-ray packets (by hand, 22:05){replay}. The lane kernel against "
+        "the code before, in three alternated `path_floor --scene cornell` pairs "
+        "(22:10–22:18), took 769 against 938, 761 against 790 and 787 against 789 ns per "
+        "path. The renderer's CPU per path (`bench.ab 3c18d92 --scene S`, 6–8 alternated "
+        "pairs) was 0.85× and 0.96× on the Cornell box in two runs (quartiles 0.78–0.95 "
+        "and 0.91–1.09), 0.88× on the environment-lit scene (0.80–1.13), 0.94× on the "
+        "heavy scene (0.88–1.14) and 1.01× on the textured box (0.97–1.06). That is a few "
+        "per cent on scenes with few triangles, on a machine about twice as slow as in "
+        "the earlier runs today, and noisy, and one without AVX-512: Embree emulates "
+        "its 16-ray packets there. Where it runs them natively (AVX-512) they measured "
+        "cheaper than single rays (312 ns per Cornell path against 363 for the whole "
+        "paths' rays, the heavy scene's 639 against 750, at 19:01), so the lanes keep "
+        "them there: `lane_paths.PACKETS` "
+        "(`embree.native_packets`, LLVM's host features) is a compile-time constant of "
+        "the lane kernel, and §6 replays the lanes' packets both ways on every run. "
+        "Ray by ray the lanes' hits are bit for bit those of the whole paths "
+        "(`tests/test_embree.py`: lane by lane equals `intersect1`; the packets agree "
+        "within a tolerance), and `tests/test_lane_paths.py` traces the same paths both "
+        "ways on any machine.")
+    add("- **The first image's garbage collection** (`relray/__init__.py`, 21:25–21:40): "
+        "a warm `relray render presets/cornell.toml --spp 1` spent about a quarter of its "
+        "time walking numba's ~180 000 objects. Part of it was collections during the "
+        "imports and the first kernel load (0.195 s of CPU, by `gc.callbacks`). Most "
+        "was the interpreter's last collection as it exits, after the files are written: "
+        "the process ended 0.56–0.60 s after the command returned. `relray.cli_main` now "
+        "keeps the collector off during the imports, freezes their objects "
+        "(`gc.freeze`), and freezes everything again when the command is done. After the "
+        "change, collections during the run take 0.017 s and the exit 0.03 s. Warm, from "
+        "process start to exit, new ÷ old in 9 alternated pairs (the old `cli_main` "
+        "from the commit before, 21:39): **0.66×** (quartiles 0.60–0.71; medians 1.77 "
+        "against 2.74 s). This session's machine ran the old code in 2.3–2.7 s, where "
+        "the run of 18:54 measured 1.12 s, so §5c's figure of this run cannot be set "
+        "against the earlier ones. Each section now records the interpreter's speed "
+        "(the sections' table: the CPU time of a fixed Python loop), so that runs on "
+        "different machines can be told apart. `tests/test_cli.py` checks both freezes, "
+        "that no collection runs during the imports, and that the collector is on during "
+        "the command.")
+    add("- Tried and dropped this round, by hand on 262 144 paths: the sensor values "
+        "folded into the film's accumulation (next step 6). One fused loop cost 32–35 ns "
+        "per path against 44–45 ns for the two passes: about 1 % of a Cornell path, for "
+        "a second accumulate beside `Film.add_samples`. The hero wavelengths' table rows "
+        "packed into one 64-byte record per cell: 65–73 against 53–70 ns, no gain. The "
+        "hero pass in blocks of 16 on the stack, for vector code: 60–80 against 44–73 "
+        "ns, slower. pydantic's deferred schema build for the job's tables: 0.29–0.32 s "
+        "against 0.31–0.33 s for the import and the parse, nothing.")
 
 
 def _map_light_bullet(add, d) -> None:
@@ -2311,6 +2388,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _lane_rays_bullet(add, d)
     _map_light_bullet(add, d)
     _hero_table_bullet(add, d)
     _lane_numbers_bullet(add, d)
@@ -2613,11 +2691,11 @@ def _section_recommendations(add, d) -> None:
     add("5. **Whole paths for glossy and glass materials**: the principled material's "
         "other lobes as branches of the whole-path kernel (the wavefront stays for alpha "
         "masks, area-light quads and the denoising features).")
-    add("6. **Sensor values in the film's accumulation** (`integrator.sensor_values` + "
-        f"`Film.add_samples`, {_scene_ns(d, 'cornell', 'film:'):.0f} ns per path in §6's "
-        "profile; "
-        "21 ns by hand, 13 + 8, 262 144 paths, 2026-11-27 09:14): one pass, no (N, 3) "
-        "array; at most 3 % of a Cornell path.")
+    add("6. ~~**Sensor values in the film's accumulation**~~: measured and dropped "
+        "(2026-11-27 21:37, above): `integrator.sensor_values` + `Film.add_samples` "
+        f"cost {_scene_ns(d, 'cornell', 'film:'):.0f} ns per path in §6's profile, one "
+        "fused loop would save about 10 (32–35 against 44–45 ns by hand): about 1 % of a "
+        "Cornell path.")
     add("7. ~~**Cheaper random numbers**: `sobol2`'s bit reversals as LLVM's `bitreverse` "
         "intrinsic~~: nothing to gain (2026-11-27 03:08): LLVM already recognises "
         "`reverse32`'s mask steps as a bit reversal and compiles the lanes' to GFNI's "
