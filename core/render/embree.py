@@ -229,6 +229,30 @@ _HIT_END = _GEOM + 1
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _query_lanes(scene, valid, packet, nearest):  # pragma: no cover - compiled
+    """Each lane of ``packet`` whose ``valid`` word is -1, copied into one ``RTCRay(Hit)``
+    on the caller's stack and traced alone: ``rtcIntersect1`` (``nearest``; its tfar and
+    hit words copied back) or ``rtcOccluded1`` (its tfar copied back)."""
+    one = stack_array(1, 32, np.uint32)[0]
+    addr = one.ctypes.data
+    W = PACKET
+    for lane in range(W):
+        if valid[lane] != -1:
+            continue
+        for w in range(_RAY_WORDS):
+            one[w] = packet[w * W + lane]
+        if nearest:
+            one[_PRIM], one[_GEOM] = _INVALID, _INVALID
+            _rtc_intersect1(scene, addr, 0)
+        else:
+            _rtc_occluded1(scene, addr, 0)
+        packet[_TFAR * W + lane] = one[_TFAR]
+        if nearest:
+            for w in range(_RAY_WORDS, _HIT_END):
+                packet[w * W + lane] = one[w]
+
+
+@njit(cache=True, nogil=True, inline="always")
 def intersect_lanes(scene, valid, packet):  # pragma: no cover - compiled
     """:func:`intersect16`'s answer, ray by ray: each lane whose ``valid`` word is -1 is
     copied into one ``RTCRayHit`` on the caller's stack, traced by ``rtcIntersect1``, and
@@ -239,35 +263,14 @@ def intersect_lanes(scene, valid, packet):  # pragma: no cover - compiled
     What the SIMD lanes call where Embree has no native 16-ray packets
     (:func:`native_packets`): there its single-ray traversal costs less on the lanes'
     rays than its emulated packets."""
-    one = stack_array(1, 32, np.uint32)[0]
-    addr = one.ctypes.data
-    W = PACKET
-    for lane in range(W):
-        if valid[lane] != -1:
-            continue
-        for w in range(_RAY_WORDS):
-            one[w] = packet[w * W + lane]
-        one[_PRIM], one[_GEOM] = _INVALID, _INVALID
-        _rtc_intersect1(scene, addr, 0)
-        packet[_TFAR * W + lane] = one[_TFAR]
-        for w in range(_RAY_WORDS, _HIT_END):
-            packet[w * W + lane] = one[w]
+    _query_lanes(scene, valid, packet, True)
 
 
 @njit(cache=True, nogil=True, inline="always")
 def occluded_lanes(scene, valid, packet):  # pragma: no cover - compiled
     """:func:`occluded16`'s answer, ray by ray (``rtcOccluded1`` on a copy of each valid
     lane's ray, as :func:`intersect_lanes`): a blocked lane's tfar becomes -inf."""
-    one = stack_array(1, 16, np.uint32)[0]
-    addr = one.ctypes.data
-    W = PACKET
-    for lane in range(W):
-        if valid[lane] != -1:
-            continue
-        for w in range(_RAY_WORDS):
-            one[w] = packet[w * W + lane]
-        _rtc_occluded1(scene, addr, 0)
-        packet[_TFAR * W + lane] = one[_TFAR]
+    _query_lanes(scene, valid, packet, False)
 
 
 @njit(cache=True, nogil=True, inline="always")
