@@ -4,26 +4,27 @@
 ray an ``rtcIntersect1``/``rtcOccluded1``. Here sixteen paths share one loop: each lane
 holds a path's state (structure of arrays, one row per quantity, one column per lane),
 every bounce of the sixteen is one packet of rays, their shading a few loops over the
-lanes that LLVM compiles to vector code for the machine it runs on (on this AVX-512
-machine 16-lane zmm code: gathers from the scene's tables, the Sobol numbers' integer
-hashing, the light sample, the cosine warp; branch-free, a lane's decisions are selects
-and masks), their shadow rays another packet; a lane whose path has ended takes the next
-camera ray from the queue before the next packet. Embree traces a packet's rays one at a
-time where it has no native 16-ray packets (AVX2: :func:`.embree.intersect_lanes`,
-``rtcIntersect1`` on each lane, a little cheaper there than its emulated packets), as
-one ``rtcIntersect16`` where it has (AVX-512: :data:`PACKETS`). The
-shading is what Mitsuba 3's LLVM variant does with its JIT-compiled kernels, written out
-by hand for the scenes where it pays (:func:`applies`): static, Lambert, flat or
-smooth-shaded, lit by emissive triangles, point, spot and sun lights, a constant sky or
-a colour environment map, with or without image textures. Image textures (base colour,
-roughness, normal, emission) are a lane loop of their own (:func:`texture_lanes`: scalar
-calls per lane), so the other loops stay vector code. The environment map's lookups are
-vector code: the escaping rays' (u, v) by polynomial ``acos``/``atan2`` (:mod:`.arcs`),
-the light samples' directions by :func:`.sampling.sincos_2pi`, the texels' spectra from
-their coefficient rows gathered into the stack first (:func:`texel_rows`,
-:func:`texel_values`: a loop that gathers the rows and evaluates the sigmoids at once
-was left scalar by LLVM and cost 2–3× as much); the light samples' texels come from the
-sampler's guided searches, a short scalar loop (:func:`pick_texels`).
+lanes that LLVM compiles to vector code for the machine it runs on (on an AVX-512
+machine 16-lane zmm code, on AVX2 two 8-lane halves: gathers from the scene's tables,
+the Sobol numbers' integer hashing, the light sample, the cosine warp; branch-free, a
+lane's decisions are selects and masks), their shadow rays another packet; a lane whose
+path has ended takes the next camera ray from the queue before the next packet. Embree
+traces a packet's rays one at a time where it has no native 16-ray packets (AVX2:
+:func:`.embree.intersect_lanes`, ``rtcIntersect1`` on each lane, a little cheaper there
+than its emulated packets), as one ``rtcIntersect16`` where it has (AVX-512:
+:data:`PACKETS`). The shading is what Mitsuba 3's LLVM variant does with its
+JIT-compiled kernels, written out by hand for the scenes where it pays
+(:func:`applies`): static, Lambert, flat or smooth-shaded, lit by emissive triangles,
+point, spot and sun lights, a constant sky or a colour environment map, with or without
+image textures. Image textures (base colour, roughness, normal, emission) are a lane
+loop of their own (:func:`texture_lanes`: scalar calls per lane), so the other loops
+stay vector code. The environment map's lookups are vector code: the escaping rays' (u,
+v) by polynomial ``acos``/``atan2`` (:mod:`.arcs`), the light samples' directions by
+:func:`.sampling.sincos_2pi`, the texels' spectra from their coefficient rows gathered
+into the stack first (:func:`texel_rows`, :func:`texel_values`: a loop that gathers the
+rows and evaluates the sigmoids at once was left scalar by LLVM and cost 2–3× as much);
+the light samples' texels come from the sampler's guided searches, a short scalar loop
+(:func:`pick_texels`).
 
 What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
 (:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
@@ -621,9 +622,9 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
     (:data:`MAP_LIGHT`), ``textured`` image textures (:func:`texture_lanes`), ``env_on`` an
     environment map (:func:`env_misses`, :func:`pick_texels`), ``native16`` the rays
     as Embree's 16-ray packets (else one at a time: :data:`PACKETS`). The five are
-    constants of the compiled code: LLVM drops the branches they close, so the Cornell box's lanes
-    carry no normal interpolation, no light kinds it does not have and no texture lookups
-    (numba's on-disk cache keys each variant by its closure's values)."""
+    constants of the compiled code: LLVM drops the branches they close, so the Cornell
+    box's lanes carry no normal interpolation, no light kinds it does not have and no
+    texture lookups (numba's on-disk cache keys each variant by its closure's values)."""
 
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
     def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
