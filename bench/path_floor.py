@@ -67,11 +67,9 @@ from relray.core.render.embree import (
     GEOM,
     PACKET,
     TFAR,
-    intersect16,
-    intersect_lanes,
+    intersect_packet,
     intersect_rays,
-    occluded16,
-    occluded_lanes,
+    occluded_packet,
     occluded_rays,
     packet_buffers,
     set_packet_ray,
@@ -138,14 +136,10 @@ def replay_packets(scene, log_hit, log_shadow, log_valid, n,
                                log[k, 3, lane], log[k, 4, lane], log[k, 5, lane],
                                log_shadow[k, 6, lane] if shadow else MISS_DISTANCE)
                 valid[lane] = log_valid[k, shadow, lane]
-            if shadow and by_ray:
-                occluded_lanes(scene, valid, hit)
-            elif shadow:
-                occluded16(scene, valid, hit)
-            elif by_ray:
-                intersect_lanes(scene, valid, hit)
+            if shadow:
+                occluded_packet(scene, valid, hit, not by_ray)
             else:
-                intersect16(scene, valid, hit)
+                intersect_packet(scene, valid, hit, not by_ray)
             for lane in range(W):
                 found += valid[lane] != 0 and (f[TFAR * W + lane] < 0.0 if shadow
                                                else hit[GEOM * W + lane] != 0xFFFFFFFF)

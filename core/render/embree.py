@@ -274,6 +274,26 @@ def occluded_lanes(scene, valid, packet):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def intersect_packet(scene, valid, packet, native16):  # pragma: no cover - compiled
+    """The packet's nearest hits by :func:`intersect16` (``native16``) or ray by ray by
+    :func:`intersect_lanes`: the same answer (the SIMD lanes, :func:`native_packets`)."""
+    if native16:
+        intersect16(scene, valid, packet)
+    else:
+        intersect_lanes(scene, valid, packet)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def occluded_packet(scene, valid, packet, native16):  # pragma: no cover - compiled
+    """The packet's occlusion by :func:`occluded16` (``native16``) or ray by ray by
+    :func:`occluded_lanes`."""
+    if native16:
+        occluded16(scene, valid, packet)
+    else:
+        occluded_lanes(scene, valid, packet)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def rayhit_buffer():  # pragma: no cover - compiled
     """(float32 view, uint32 view, address) of a fresh RTCRayHit, aligned to 64 bytes."""
     raw = np.empty(RAYHIT_WORDS, np.uint32)

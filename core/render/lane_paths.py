@@ -71,11 +71,9 @@ from .embree import (
     PACKET_WORDS,
     PRIM,
     TFAR,
-    intersect16,
-    intersect_lanes,
+    intersect_packet,
     native_packets,
-    occluded16,
-    occluded_lanes,
+    occluded_packet,
     set_packet_ray,
 )
 from .environment import (
@@ -759,10 +757,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                 for c in range(6):
                     for lane in range(W):
                         log_hit[packets, c, lane] = ray[c, lane]
-            if native16:
-                intersect16(handle, valid, hit)
-            else:
-                intersect_lanes(handle, valid, hit)
+            intersect_packet(handle, valid, hit, native16)
             # the hits' records on their way from memory while the numbers are drawn
             prefetch_hits(tri_rec, path, hit)
             bounce_numbers(key, depth, ua, ub)
@@ -792,10 +787,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                     log_valid[packets, 0, lane] = valid[lane]
                     log_valid[packets, 1, lane] = svalid[lane]
             packets += 1
-            if native16:
-                occluded16(handle, svalid, shadow)
-            else:
-                occluded_lanes(handle, svalid, shadow)
+            occluded_packet(handle, svalid, shadow, native16)
             add_unblocked(shadowf, svalid, nee, acc)
             # the paths that ended give their radiance and, from the camera ray, its distance
             for lane in range(W):
