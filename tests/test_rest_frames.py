@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 from relray.core.physics.relativity import aberrate_doppler_ray
+from relray.core.render import rest_frames as rf
 from relray.core.render.accel import MISS_DISTANCE, Accel
-from relray.core.render.rest_frames import GroupAccel, MovingScene, meets_box
+from relray.core.render.rest_frames import (
+    GroupAccel,
+    MovingScene,
+    meets_box,
+    reaches_box,
+    rest_ray,
+)
 from relray.core.scene import shapes
 from relray.core.scene.worldlines import Segment, spatial_boost
 
@@ -222,3 +229,47 @@ def test_a_ray_leaving_a_body_in_its_rest_frame_form_finds_the_same_hit(u):
     np.testing.assert_allclose(carried.t, lab.t, rtol=1e-5, atol=2e-5)
     same = carried.prim == lab.prim
     assert same.mean() > 0.98  # a ray through an edge may pick either triangle
+
+
+@pytest.mark.parametrize("u", [(0.0, 0.0, 0.0), (0.3, -0.5, 0.2), (0.0, 0.0, -0.99)])
+def test_the_groups_bounding_sphere_and_box_change_no_hit(u):
+    """A group is traced only where its rest-frame ray reaches its bounding sphere and box
+    (rest_frames.rest_ray, reaches_box): the same hits and the same occlusion as with both
+    bounds taken away, for rays from inside and outside a thin, off-centre group (a
+    tilted plate: its box and sphere differ), aimed at it, grazing it and ending short of
+    it; the bounds do leave rays out."""
+    rng = np.random.default_rng(5)
+    plate = shapes.quad(np.array([[-1.0, -0.2, 0.0], [1.0, -0.2, 0.3], [1.0, 0.2, 0.3],
+                                  [-1.0, 0.2, 0.0]], np.float64))
+    tris = np.concatenate([plate, plate[:1] + [0.0, 0.0, 0.5]])
+    seg = Segment(np.array(u, np.float64), 0.0, np.array([0.0, 3.0, 0.0]))
+    group = Accel(tris)
+    ms = MovingScene(None, [GroupAccel(group, 0, (seg,), 0)], np.zeros(3))
+    open_ms = MovingScene(None, [GroupAccel(group, 0, (seg,), 0)], np.zeros(3))
+    f = open_ms.segments.f
+    f[:, rf.RAD], f[:, rf.LO:rf.LO + 3], f[:, rf.HI:rf.HI + 3] = np.inf, -np.inf, np.inf
+    n, t0 = 6000, 4.0
+    aim = retarded(np.array(u), seg.p_ref, t0) + group.origin
+    x0 = rng.normal(0.0, 1.5, (n, 3)) + np.where(rng.uniform(size=(n, 1)) < 0.3, aim, 0.0)
+    d = np.where(rng.uniform(size=(n, 1)) < 0.6, aim + rng.normal(0.0, 0.6, (n, 3)) - x0,
+                 rng.normal(size=(n, 3)))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    o, d, t = x0.astype(np.float32), d.astype(np.float32), np.full(n, t0)
+    want = open_ms.intersect(o, d, t, {})
+    got = ms.intersect(o, d, t, {})
+    hit = want.prim >= 0
+    assert n // 20 < hit.sum() < n - n // 20
+    np.testing.assert_array_equal(got.prim, want.prim)
+    np.testing.assert_array_equal(got.t, want.t)
+    np.testing.assert_array_equal(got.u[hit], want.u[hit])
+    length = np.where(hit, want.t * rng.choice([0.999, 1.001], n), 20.0).astype(np.float32)
+    blocked = open_ms.occluded(o, d, length, t, {})
+    assert 0 < blocked.sum() < n
+    np.testing.assert_array_equal(ms.occluded(o, d, length, t, {}), blocked)
+    # how many rays each bound leaves out (the sphere's nearest approach, the box's slabs)
+    kept = [rest_ray(*map(float, o[i]), *map(float, d[i]), t0, MISS_DISTANCE,
+                     ms.segments.f, 0) for i in range(n)]
+    in_sphere = np.array([k[0] for k in kept])
+    in_box = np.array([k[0] and reaches_box(ms.segments.f, 0, *k[1:7], k[8]) for k in kept])
+    assert np.all(in_sphere[hit]) and np.all(in_box[hit])
+    assert n // 10 < n - in_sphere.sum() and n // 50 < in_sphere.sum() - in_box.sum()
