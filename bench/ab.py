@@ -8,9 +8,10 @@ git revision) is unpacked with ``git archive`` into a temporary folder (its kern
 their own numba cache entries, keyed by file path: its first run compiles them), then
 each round runs one process of each tree, the order alternating from round to round.
 A process builds and renders the scene (:func:`.profile_scenes.scene_bench`: cornell,
-heavy, environment, textured, moving; ``size``², ``spp``, 1 thread) ``reps`` times after one
-untimed render and prints its fastest process CPU time per path (of the render call:
-:class:`.common.RelrayBench`). The result is the
+heavy, environment, textured, moving (the room as one body); or ``peer_moving``, the
+peers' moving scene of four bodies, :func:`.path_floor.floor_bench`; ``size``², ``spp``,
+1 thread) ``reps`` times after one untimed render and prints its fastest process CPU
+time per path (of the render call: :class:`.common.RelrayBench`). The result is the
 median over the rounds of (this ÷ revision) with its quartiles: a paired ratio, so a
 drift of the machine's load cancels within a round.
 """
@@ -27,14 +28,18 @@ from pathlib import Path
 
 #: The worker, run with a tree's parent on PYTHONPATH: only what every revision since the
 #: per-scene profile has (``RelrayBench.render``; ``profile_scenes.scene_bench``, or in
-#: revisions older than it ``scene_benches``, which builds every scene).
+#: revisions older than it ``scene_benches``, which builds every scene; ``peer_moving``
+#: needs ``path_floor.floor_bench``, 2026-11-27).
 WORKER = """
 import sys, time
 from pathlib import Path
 from relray.bench import profile_scenes
 scene, spp, size, reps, tmp = sys.argv[1], *map(int, sys.argv[2:5]), Path(sys.argv[5])
 heavy = 1_000_000 if scene == "heavy" else 2000
-if hasattr(profile_scenes, "scene_bench"):
+if scene == "peer_moving":
+    from relray.bench import path_floor
+    bench = path_floor.floor_bench("moving", tmp, heavy)
+elif hasattr(profile_scenes, "scene_bench"):
     bench = profile_scenes.scene_bench(scene, tmp, heavy)
 else:
     bench = profile_scenes.scene_benches(tmp, heavy)[scene]
