@@ -1608,9 +1608,10 @@ def _section_moving(add, d) -> None:
         "`rest_frames.moving_hits` for a wavefront; shadow rays `rest_frames.blocked_ray`, "
         "called from inside either kernel): the static BVH only when the ray meets its box (with "
         "the whole room moving it holds only the light), then per segment the rest-frame "
-        "ray (boost, aberration, the emission window and a bounding-sphere test, "
-        "`rest_frames.rest_ray`) and, if it can reach the group, Embree's query on the "
-        "group's BVH. No pass, buffer or Python call per group: a group costs its "
+        "ray (the boosted origin event and B = k d_u, whose parameter is the lab "
+        "distance; the emission window, a bounding-sphere and a bounding-box test: "
+        "`rest_frames.rest_ray`, `reaches_box`) and, if it can reach the group, Embree's "
+        "query on the group's BVH. No pass, buffer or Python call per group: a group costs its "
         "rest-frame arithmetic and its traversals. A ray that leaves a moving body carries "
         "its form in that body's rest frame (origin, direction, k = D_out, written where the "
         "bounce happened), so the segment it leaves needs no "
@@ -2012,6 +2013,45 @@ def peer_ratios(d, scene: str) -> tuple[dict, str]:
     return ratio, text
 
 
+def _body_bounds_bullet(add, d) -> None:
+    """The 2026-11-28 round: the moving bodies' rest-frame traversal (a box per body, the
+    lab-distance parameterisation), what its cost is made of, and what was dropped."""
+    add("- **The bodies' rest-frame traversal** (`render/rest_frames.py`, 2026-11-28 01:40–02:20, "
+        "AVX2; last round's next step 4): a body was traced wherever its rest-frame ray reached "
+        "its bounding sphere; now also only where it meets its bounding box in its rest frame "
+        "(`rest_frames.reaches_box`; the sphere stays as the first, cheaper test). On the peers' "
+        "moving scene (the box as four bodies, §2) the kernel's nearest-hit rays reached 2.71 "
+        "bodies' spheres each and reach 2.25 bodies' boxes, its shadow rays 2.91 and 2.57 (the "
+        "wall bodies' boxes are the room, the blocks' much smaller than their spheres). The "
+        "rest-frame ray is now parameterised by the lab distance: the lab point o + s d at lab "
+        "time t − s is the rest-frame point x_u(0) + s B with B = C⁻¹(d + u) = k d_u (C the "
+        "contraction along u), so Embree's distance along B is the lab distance and neither d_u "
+        "nor k = γ(1 + u·d) needs a division (`rest_frames.rest_ray`, in the aberration's "
+        "cancellation-free chord form; the hits agree with the old form's to float32 rounding: "
+        "the same triangles and bodies on every recorded ray, the distances within 8e-6 relative, "
+        "2e-7 at the 99th percentile). Embree alone on the kernel's recorded rays (`path_floor`'s "
+        "replay, in one process against the previous code, 15 alternated pairs, 128², 8 spp): "
+        "**0.96×** (quartiles 0.95–0.97; 1064 → 1026 ns per path), of which the box test alone "
+        "0.94× (0.91–0.98, the same code with the box set to infinity). The renderer on that "
+        "scene (`python -m relray.bench.ab 0a8e080 --scene peer_moving --pairs 10`, 128², 16 spp, "
+        "1 thread, with a clean-clone CI run beside it): **0.97×** (quartiles 0.93–0.98; 2255 → "
+        "2244 ns per path in medians, 6 pairs before gave 0.86×, quartiles 0.78–1.19). "
+        "`tests/test_rest_frames.py` checks that the sphere and the box change no hit and no "
+        "occlusion (a thin tilted group, rays from inside and outside, grazing and ending short, "
+        "β 0–0.99), and that each bound does leave rays out (a smaller box or sphere fails it). "
+        "**What the traversal is made of**: of the 1145 ns per path that Embree alone costs on "
+        "this scene, 391 remain with the bodies' Embree queries taken out (the boosts, the "
+        "bounds, the static BVH's box test, the calls' set-up): the queries themselves cost about "
+        "750 ns, 14.6 per path (8.9 nearest-hit, 5.6 shadow) at about 52 ns each on BVHs of 8–9 "
+        "triangles, where a query's fixed cost dominates. The static BVH (the light) is met by "
+        "0.7 % of the nearest-hit rays and none of the shadow rays. Tried and dropped: the "
+        "segments' rest-frame rays computed first, side by side in stack memory, then traced (so "
+        "the out-of-order core overlaps the segments' arithmetic): 1.04× the one-pass loop, "
+        "slower. perf on the whole-path kernel (its JIT code mapped by hand) finds no hot spot in "
+        "its own code: the hottest window of 32 instructions holds 5.7 % of its samples (a "
+        "normalisation's square root and division).")
+
+
 def _lane_rays_bullet(add, d) -> None:
     """The 2026-11-27 late round: the lanes' rays traced one at a time, the first image's
     garbage collection, and what was measured and dropped."""
@@ -2388,6 +2428,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _body_bounds_bullet(add, d)
     _lane_rays_bullet(add, d)
     _map_light_bullet(add, d)
     _hero_table_bullet(add, d)
@@ -2666,11 +2707,21 @@ def _section_recommendations(add, d) -> None:
         "about 40 % of its CPU per path (1181 against the plain box's ~690 ns); the "
         "atlas descriptors, the mip level and the texels of sixteen lanes as vector code "
         "would be the next step.")
-    add("2. **SIMD lanes for moving bodies** (each body's rest-frame rays as a packet of "
-        "its own, the frame changes as lane arithmetic): on the moving scene whole paths "
-        "spend about 600 ns per path outside the traversal (§6); the traversal itself "
-        "bounds the scene's ratio to `llvm_ad_spectral` above 1 (§6, the moving scene's "
-        "floor), so this would narrow the gap, not close it.")
+    add("2. **SIMD lanes for moving bodies**: on the moving scene whole paths spend "
+        "about 800 ns per path outside the rest-frame traversal (§6), which alone bounds "
+        "the scene's ratio to `llvm_ad_spectral` at 0.69 / 0.71 (§6, the moving scene's "
+        "floor). Cut as the lanes cut the static box's (223 against 473 ns outside "
+        "Embree), a moving path would cost about 0.8× what it does, about 1.0 / 1.3 "
+        "against `llvm_ad_spectral`. The design: lane rows for each ray's lab time, the "
+        "segment it leaves, the pending D_out and its rest-frame form; each lane's "
+        "nearest hit through `rest_frames.nearest_one` and its shadow ray through "
+        "`blocked_ray` (as `embree.intersect_lanes` traces a lane's ray alone); the "
+        "frame changes (aberration, D⁵, the lanes' column shift by ln D, which needs a "
+        "vector logarithm like `rgb_table.lambda_of_grid_column`'s exponential) as lane "
+        "arithmetic; next-event estimation from the hit's lab event with the light's "
+        "spectrum at D_l λ; first for static lights without a map or textures (whole "
+        "paths keep the rest), checked path by path against whole paths as "
+        "`tests/test_lane_paths.py` does for static scenes.")
     add("3. ~~**The environment-lit scene's lanes**~~: done (2026-11-27 18:50, above: "
         "the map's λ as vector code, a kernel for the map as the only light, the "
         "searches only where a light sample is made; 0.79× its CPU per path). What is "
@@ -2682,12 +2733,13 @@ def _section_recommendations(add, d) -> None:
         f"{_scene_ns(d, 'environment', 'film:'):.0f}, the camera rays "
         f"{_scene_ns(d, 'environment', 'camera:'):.0f} (the next step 6 would take part "
         "of the film's).")
-    add("4. **The bodies' rest-frame traversal** (the moving scene): each body's rays "
-        "are boosted and traced in its own BVH, one `rtcIntersect1` per body and ray "
-        "(an `rtcIntersect8` packet over one masked scene is slower, above); a tighter "
-        "bound than the bounding sphere per body (a box in its rest frame) would skip "
-        "more of them where bodies are small, and a shadow ray from a moving vertex could "
-        "use its rest-frame form for its own body (one boost less).")
+    add("4. **The bodies' rest-frame traversal** (the moving scene): ~~a box per body "
+        "in its rest frame~~ done (2026-11-28, above: 0.96× of the traversal). What is "
+        "left: two thirds of the traversal are the bodies' Embree queries at about 52 ns "
+        "each on BVHs of 8–9 triangles (above), one per body a ray can reach (an "
+        "`rtcIntersect8` packet over one masked scene was slower, 2026-11-26); a shadow "
+        "ray from a moving vertex could use its rest-frame form for its own body (one "
+        "boost less, about 2 % of a path).")
     add("5. **Whole paths for glossy and glass materials**: the principled material's "
         "other lobes as branches of the whole-path kernel (the wavefront stays for alpha "
         "masks, area-light quads and the denoising features).")
