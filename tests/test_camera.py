@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from relray.core.physics import relativity
-from relray.core.render.camera import PinholeCamera, camera_ray
+from relray.core.render.camera import PinholeCamera, camera_ray, pixel_column_row
 from relray.core.render.sampling import path_keys, sobol2_dims
 from relray.core.scene.job import look_at_rotation
+from relray.core.scene.schema import MAX_IMAGE_SIDE, MAX_PIXELS
 
 
 def camera(width=40, height=30, fov=50.0):
@@ -124,3 +125,19 @@ def test_primary_rays_in_blocks_are_each_paths_own_ray(n):
         assert D[i] == f and skipped[i] == t_in
     assert np.any(skipped > 0.0) and (n < 15 or np.any(skipped == 0.0))  # hits and misses
     assert all(np.all(a[n:] == 7.0) for a in out) and o.base is out[0]
+
+
+def test_pixel_column_row_is_the_integer_divmod_up_to_the_jobs_limits():
+    """The camera's pixel (column, row) by a float64 division (no 64-bit integer division
+    per ray): equal to divmod at every row boundary (k·w - 1, k·w, k·w + 1) for widths
+    from 1 to MAX_IMAGE_SIDE and rows up to MAX_PIXELS / w, and at random pixels."""
+    rng = np.random.default_rng(3)
+    for w in (1, 2, 3, 7, 640, 1920, 4099, MAX_IMAGE_SIDE - 1, MAX_IMAGE_SIDE):
+        k = np.unique(np.concatenate([np.arange(1, 200), rng.integers(1, MAX_PIXELS // w, 500),
+                                      [MAX_PIXELS // w - 1, MAX_PIXELS // w]]))
+        p = np.concatenate([k * w - 1, k * w, k * w + 1, rng.integers(0, MAX_PIXELS, 500)])
+        p = p[(p >= 0) & (p < MAX_PIXELS)]
+        got = np.array([pixel_column_row(int(q), w) for q in p])
+        row, col = np.divmod(p, w)
+        np.testing.assert_array_equal(got[:, 0], col)
+        np.testing.assert_array_equal(got[:, 1], row)
