@@ -58,11 +58,11 @@ class SegmentTable(NamedTuple):
     and one float64 row of the segment's constants (``f``, (S, :data:`SEG_COLUMNS`)):
     the direction of u (``H``..``H+2``), |u| (``B``), 1/γ, γ and γ²/(γ + 1) (``IG``,
     ``G``, ``C``: no division per ray), the frame origin event (``T_REF``, p_ref in
-    accelerator coordinates ``Q``..``Q+2``), the emission window [``T_LO``, ``T_HI``)
-    the group's bounding sphere (centre = its BVH's origin ``CEN``..``CEN+2``,
-    ``RAD``) and its bounding box in BVH coordinates (``LO``..``LO+2``, ``HI``..``HI+2``).
-    Three arrays, so a compiled call that receives the table copies three
-    array descriptors, not one per quantity."""
+    accelerator coordinates ``Q``..``Q+2``), the emission window [``T_LO``, ``T_HI``),
+    the group's bounding sphere (centre = its BVH's origin ``CEN``..``CEN+2``, ``RAD``)
+    and its bounding box in BVH coordinates (``LO``..``LO+2``, ``HI``..``HI+2``). Three
+    arrays, so a compiled call that receives the table copies three array descriptors,
+    not one per quantity."""
 
     handle: np.ndarray
     start: np.ndarray
@@ -95,8 +95,8 @@ def rest_ray(ox, oy, oz, dx, dy, dz, t, best, sf, s):  # pragma: no cover - comp
     division. d·h + b = |c|²/2 - (1 - b) with the chord c = d + h, d_⊥ = c - (|c|²/2) h
     (aberrate_doppler_ray's cancellation-free form). Returns (kept, start = x_u(s_lo)
     (BVH coordinates), B, lab start s_lo, lab length s_hi - s_lo); not kept when the part
-    is empty or cannot reach the group's bounding sphere. Branch-free, so the segments'
-    rays of one lab ray are computed side by side (:func:`nearest_ray`)."""
+    is empty or cannot reach the group's bounding sphere (:func:`reaches_box` tests its
+    box)."""
     lo = max(0.0, t - sf[s, T_HI])
     hi = min(np.float64(best), t - sf[s, T_LO])
     hx, hy, hz, bs = sf[s, H], sf[s, H + 1], sf[s, H + 2], sf[s, B]
@@ -153,8 +153,8 @@ def reaches_box(sf, s, sx, sy, sz, bx, by, bz, length):  # pragma: no cover - co
     """Whether segment ``s``'s rest-frame ray (:func:`rest_ray`: start, B, lab length)
     meets its group's bounding box (BVH coordinates, ``LO``, ``HI`` of ``sf``) before
     its end: :func:`meets_box` along B, whose parameter is the lab distance. Tighter
-    than the sphere for a compact body (the Cornell box's blocks: 15 % of the rays that
-    reach their spheres miss their boxes, 2026-11-28)."""
+    than the sphere for a compact body: on the peers' moving scene (the Cornell box as
+    four bodies) 15 % of the rays that reach a body's sphere miss its box (2026-11-28)."""
     return meets_box(sx, sy, sz, bx, by, bz, length,
                      (sf[s, LO], sf[s, LO + 1], sf[s, LO + 2]),
                      (sf[s, HI], sf[s, HI + 1], sf[s, HI + 2]))
@@ -172,9 +172,9 @@ def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, 
     (≥ 0) carries its form in that rest frame (row ``i`` of ``rest``: origin in BVH
     coordinates, unit direction, k), as the integrator made it there: that segment uses
     it instead of transforming the lab ray back (the same ray up to rounding, at no
-    cost; while the origin event is inside the segment's window, so s_lo = 0). Returns (lab distance
-    (``MISS_DISTANCE`` on a miss), triangle (-1), u, v, segment hit (-1: static));
-    ``f``, ``w``, ``addr``: an RTCRayHit buffer."""
+    cost; while the origin event is inside the segment's window, so s_lo = 0). Returns
+    (lab distance (``MISS_DISTANCE`` on a miss), triangle (-1), u, v, segment hit (-1:
+    static)); ``f``, ``w``, ``addr``: an RTCRayHit buffer."""
     handle, start, sf = st
     miss = np.float32(MISS_DISTANCE)
     x, y, z = np.float64(ox), np.float64(oy), np.float64(oz)
