@@ -2731,21 +2731,41 @@ def _section_recommendations(add, d) -> None:
         "about 40 % of its CPU per path (1181 against the plain box's ~690 ns); the "
         "atlas descriptors, the mip level and the texels of sixteen lanes as vector code "
         "would be the next step.")
-    add("2. **SIMD lanes for moving bodies**: on the moving scene whole paths spend "
-        "about 800 ns per path outside the rest-frame traversal (§6), which alone bounds "
-        "the scene's ratio to `llvm_ad_spectral` at 0.69 / 0.71 (§6, the moving scene's "
-        "floor). Cut as the lanes cut the static box's (223 against 473 ns outside "
-        "Embree), a moving path would cost about 0.8× what it does, about 1.0 / 1.3 "
-        "against `llvm_ad_spectral`. The design: lane rows for each ray's lab time, the "
-        "segment it leaves, the pending D_out and its rest-frame form; each lane's "
-        "nearest hit through `rest_frames.nearest_one` and its shadow ray through "
-        "`blocked_ray` (as `embree.intersect_lanes` traces a lane's ray alone); the "
-        "frame changes (aberration, D⁵, the lanes' column shift by ln D, which needs a "
-        "vector logarithm like `rgb_table.lambda_of_grid_column`'s exponential) as lane "
-        "arithmetic; next-event estimation from the hit's lab event with the light's "
-        "spectrum at D_l λ; first for static lights without a map or textures (whole "
-        "paths keep the rest), checked path by path against whole paths as "
-        "`tests/test_lane_paths.py` does for static scenes.")
+    pfm, pfc2 = pfc.get("moving", {}), pfc.get("cornell", {})
+    bound = moving_floor_bound(d)
+    if bound and _num(pfm.get("whole_other_ns")) and _num(pfc2.get("lanes_other_ns")) \
+            and _num(pfc2.get("whole_other_ns")) and _num(pfm.get("whole_ns")):
+        parts = _moving_floor_parts(d)
+        around = parts[3] if parts else 0.0
+        cut = pfm["whole_other_ns"] * pfc2["lanes_other_ns"] / pfc2["whole_other_ns"]
+        factor = (pfm["whole_ns"] - pfm["whole_other_ns"] + cut + around) \
+            / (pfm["whole_ns"] + around)
+        eqm = {int(r["level_index"]): float(r["ratio_relray_over_peer"])
+               for r in d.get("peer_equal_error", [])
+               if r["scene"] == "moving" and r["peer"] == "llvm_ad_spectral"
+               and r["metric"] == "rel_mse"}
+        now = (f", about {_pair([factor * eqm[0], factor * eqm[1]])} against "
+               f"`llvm_ad_spectral` (now {_pair([eqm[0], eqm[1]])})"
+               if 0 in eqm and 1 in eqm else "")
+        gain = (f"on the moving scene whole paths spend {pfm['whole_other_ns']:.0f} ns per "
+                "path outside the rest-frame traversal (§6), which alone bounds the scene's "
+                f"ratio to `llvm_ad_spectral` at {_pair(bound)} (§6, the moving scene's "
+                "floor). Cut as the lanes cut the static box's "
+                f"({pfc2['lanes_other_ns']:.0f} against {pfc2['whole_other_ns']:.0f} ns "
+                f"outside Embree), a moving path would cost about {factor:.2f}× what it "
+                f"does{now}. ")
+    else:
+        gain = "the whole paths' work outside the rest-frame traversal (§6). "
+    add("2. **SIMD lanes for moving bodies**: " + gain + "The design: lane rows for "
+        "each ray's lab time, the segment it leaves, the pending D_out and its rest-frame "
+        "form; each lane's nearest hit through `rest_frames.nearest_one` and its shadow "
+        "ray through `blocked_ray` (as `embree.intersect_lanes` traces a lane's ray "
+        "alone); the frame changes (aberration, D⁵, the lanes' column shift by ln D, "
+        "which needs a vector logarithm like `rgb_table.lambda_of_grid_column`'s "
+        "exponential) as lane arithmetic; next-event estimation from the hit's lab event "
+        "with the light's spectrum at D_l λ; first for static lights without a map or "
+        "textures (whole paths keep the rest), checked path by path against whole paths "
+        "as `tests/test_lane_paths.py` does for static scenes.")
     add("3. ~~**The environment-lit scene's lanes**~~: done (2026-11-27 18:50, above: "
         "the map's λ as vector code, a kernel for the map as the only light, the "
         "searches only where a light sample is made; 0.79× its CPU per path). What is "
