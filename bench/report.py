@@ -2732,18 +2732,17 @@ def _section_recommendations(add, d) -> None:
         "atlas descriptors, the mip level and the texels of sixteen lanes as vector code "
         "would be the next step.")
     pfm, pfc2 = pfc.get("moving", {}), pfc.get("cornell", {})
-    bound = moving_floor_bound(d)
-    if bound and _num(pfm.get("whole_other_ns")) and _num(pfc2.get("lanes_other_ns")) \
+    parts = _moving_floor_parts(d)
+    if parts and _num(pfm.get("whole_other_ns")) and _num(pfc2.get("lanes_other_ns")) \
             and _num(pfc2.get("whole_other_ns")) and _num(pfm.get("whole_ns")):
-        parts = _moving_floor_parts(d)
-        around = parts[3] if parts else 0.0
+        _, _, eq, around, least = parts
+        bound = [least * eq[0], least * eq[1]]
         cut = pfm["whole_other_ns"] * pfc2["lanes_other_ns"] / pfc2["whole_other_ns"]
         factor = (pfm["whole_ns"] - pfm["whole_other_ns"] + cut + around) \
             / (pfm["whole_ns"] + around)
-        eqm = {int(r["level_index"]): float(r["ratio_relray_over_peer"])
-               for r in d.get("peer_equal_error", [])
-               if r["scene"] == "moving" and r["peer"] == "llvm_ad_spectral"
-               and r["metric"] == "rel_mse"}
+        ratio, _ = peer_ratios(d, "moving")
+        eqm = {k: ratio[("llvm_ad_spectral", k)] for k in (0, 1)
+               if ("llvm_ad_spectral", k) in ratio}
         now = (f", about {_pair([factor * eqm[0], factor * eqm[1]])} against "
                f"`llvm_ad_spectral` (now {_pair([eqm[0], eqm[1]])})"
                if 0 in eqm and 1 in eqm else "")

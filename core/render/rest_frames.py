@@ -184,23 +184,23 @@ def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, 
         b_t, b_p, b_u, b_v = intersect1(static, f, w, addr, ox, oy, oz, dx, dy, dz, miss)
     for s in range(handle.shape[0]):
         if s == cs and t <= sf[s, T_HI]:
-            kk, lo = np.float64(rest[i, 6]), 0.0
+            kk = np.float64(rest[i, 6])
             length = kk * min(np.float64(b_t), t - sf[s, T_LO])
             if not length > 0.0:
                 continue
             tu, pu, hu, hv = intersect1(handle[s], f, w, addr, rest[i, 0], rest[i, 1],
                                         rest[i, 2], rest[i, 3], rest[i, 4], rest[i, 5],
                                         np.float32(length))
+            sl = tu / kk
         else:
             ok, sx, sy, sz, bx, by, bz, lo, length = rest_ray(x, y, z, u, v, p, t, b_t, sf, s)
             if not ok or not reaches_box(sf, s, sx, sy, sz, bx, by, bz, length):
                 continue
-            kk = 1.0  # (B's length is k: Embree's distance along it is the lab one)
             tu, pu, hu, hv = intersect1(handle[s], f, w, addr, sx, sy, sz, bx, by, bz,
                                         np.float32(length))
+            sl = lo + tu  # (B's length is k: Embree's distance along it is the lab one)
         if pu < 0:
             continue
-        sl = lo + tu / kk
         if sl < b_t:
             b_t, b_p, b_u, b_v, b_s = np.float32(sl), pu + start[s], hu, hv, s
     return b_t, b_p, b_u, b_v, b_s
