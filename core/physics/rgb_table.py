@@ -332,6 +332,56 @@ def lambda_of_grid_column(u):
     return two_n * p
 
 
+# ln m = 2 atanh(s), s = (m - 1)/(m + 1), |s| ≤ 3 - 2√2 for m in [1/√2, √2]: the series'
+# coefficients 1/(2k + 1), k = 0 … 10 (the next term is below 2⁻⁵⁷ of the sum)
+_ATANH_SERIES = tuple(1.0 / (2 * k + 1) for k in range(11))
+_SQRT2 = math.sqrt(2.0)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def _exponent_step(m, e, k):
+    """m · 2⁻ᵏ, e + k where m ≥ 2ᵏ; m · 2ᵏ, e − k where m < 2⁻ᵏ; else m, e (selects)."""
+    big, small = 2.0 ** k, 2.0 ** -k
+    up = m >= big
+    m = m * small if up else m
+    e = e + k if up else e
+    down = m < small
+    return (m * big if down else m), (e - k if down else e)
+
+
+@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+def doppler_columns(D):
+    """The columns of :mod:`.spectrum`'s log-spaced lab grid by which a Doppler factor D
+    shifts a lane, ln(D) · INV_DLOG (the kernels' frame changes,
+    ``integrator.frame_change``), as straight-line code: D = 2ᵉ m with e an integer
+    taken out by selects (steps of 2³², 2¹⁶, …, 2 each way, exact) and m in [1/√2, √2],
+    then ln m = 2 atanh s, s = (m − 1)/(m + 1) (|s| ≤ 0.172), by its series through
+    s²¹, and e ln 2 with ln 2 in two parts: within a few units in the last place of libm's
+    ``log`` (``tests/test_rgb_table.py``). D must lie in [2⁻⁶³, 2⁶³]: a Doppler factor
+    of |β| < 1 in float64 lies within [1e-8, 1e8], the product of two within 2^±54.
+    libm's ``log`` is a call that leaves a loop over the SIMD lanes scalar; this one
+    vectorises (the moving bodies' lanes, :mod:`..render.lane_paths`)."""
+    m, e = _exponent_step(np.float64(D), 0.0, 32.0)
+    m, e = _exponent_step(m, e, 16.0)
+    m, e = _exponent_step(m, e, 8.0)
+    m, e = _exponent_step(m, e, 4.0)
+    m, e = _exponent_step(m, e, 2.0)
+    m, e = _exponent_step(m, e, 1.0)
+    # m in [2⁻¹, 2): into [1/√2, √2]
+    hi = m > _SQRT2
+    m = m * 0.5 if hi else m
+    e = e + 1.0 if hi else e
+    lo = m < 1.0 / _SQRT2
+    m = m * 2.0 if lo else m
+    e = e - 1.0 if lo else e
+    s = (m - 1.0) / (m + 1.0)
+    s2 = s * s
+    p = _ATANH_SERIES[10]
+    for k in range(9, -1, -1):
+        p = p * s2 + _ATANH_SERIES[k]
+    return ((e * _LN2_HI + 2.0 * s * p) + e * _LN2_LO) * INV_DLOG
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _coefficients_kernel(scale, data, rgb, out):
     for i in range(rgb.shape[0]):
