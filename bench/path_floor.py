@@ -247,36 +247,44 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
                                      "numbers": []}
     # the SIMD lanes (lane_paths.py), where they apply: the kernel, and Embree alone on its
     # packets (recorded, then traced again in the same order)
+    # (with moving bodies the lanes trace their rays one at a time through the bodies'
+    # rest frames, as whole paths do: Embree alone on them is the whole paths' replay)
     lanes = lane_paths.applies(sc, prep.tracer, False)
+    bodies = isinstance(prep.tracer, MovingScene)
     lanes_row: dict[str, Any] = {}
     if lanes:
         plog = lane_paths.packet_log(n, depth)
         L2 = np.empty((n, 4), np.float32)
         _, _, packets = lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2,
-                                              first_t, log=plog)
+                                              first_t, log=plog, first_seg=first_seg, t0=t0)
         lanes_row = {"lanes_paths_differing": whole_paths.paths_differing(L2, whole_l),
                      "lanes_per_packet": n_rays / packets}
         times.update(lanes=[], embree1=[], embree16=[])
     for _ in range(reps):
         if lanes:
-            t0 = time.thread_time()
-            lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2, first_t)
-            times["lanes"].append(time.thread_time() - t0)
+            start = time.thread_time()
+            lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2, first_t,
+                                  first_seg=first_seg, t0=t0)
+            times["lanes"].append(time.thread_time() - start)
             for by_ray, name in ((True, "embree1"), (False, "embree16")):
-                t0 = time.thread_time()
+                if bodies:  # (below: the whole paths' replay, no packets)
+                    continue
+                start = time.thread_time()
                 replay_packets(prep.tracer.handle, *plog, packets, by_ray)
-                times[name].append(time.thread_time() - t0)
+                times[name].append(time.thread_time() - start)
         times["wavefront"].append(run_wavefront()[0])
-        t0 = time.thread_time()
+        start = time.thread_time()
         run_whole(False)
-        times["whole"].append(time.thread_time() - t0)
-        t0 = time.thread_time()
+        times["whole"].append(time.thread_time() - start)
+        start = time.thread_time()
         run_embree()
-        times["embree"].append(time.thread_time() - t0)
-        t0 = time.thread_time()
+        times["embree"].append(time.thread_time() - start)
+        start = time.thread_time()
         draw_numbers(keys, bounces)
-        times["numbers"].append(time.thread_time() - t0)
-    ns = {k: 1e9 * min(v) / n for k, v in times.items()}
+        times["numbers"].append(time.thread_time() - start)
+    ns = {k: 1e9 * min(v) / n if v else float("nan") for k, v in times.items()}
+    if lanes and bodies:
+        ns["embree1"] = ns["embree"]
     return {"size": size, "spp": spp, "paths": n, "reps": reps,
             "wavefront_ns": ns["wavefront"], "whole_ns": ns["whole"],
             "embree_ns": ns["embree"], "numbers_ns": ns["numbers"],
@@ -289,21 +297,22 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
             "agreement_z": agreement_z(whole_l.astype(np.float64),
                                        wave_l.astype(np.float64)),
             "paths_differing": whole_paths.paths_differing(whole_l, wave_l),
-            **lanes_columns(ns, lanes_row), "load": cm.load_average()[0]}
+            **lanes_columns(ns, lanes_row, bodies), "load": cm.load_average()[0]}
 
 
-def lanes_columns(ns: dict[str, float], row: dict[str, Any]) -> dict[str, Any]:
+def lanes_columns(ns: dict[str, float], row: dict[str, Any],
+                  bodies: bool = False) -> dict[str, Any]:
     """:func:`measure`'s SIMD-lane columns (NaN where the lanes do not apply): the lane
     kernel's CPU per path, Embree alone on its packets (ray by ray, as 16-ray packet
-    queries, and whichever of the two the lanes use here: ``lane_paths.PACKETS``), the
-    rest, Embree's share, the lanes ÷ whole paths and the lanes' agreement with whole
-    paths."""
+    queries, and whichever of the two the lanes use here: ``lane_paths.PACKETS``; with
+    moving ``bodies`` ray by ray through the rest frames, no packets), the rest, Embree's
+    share, the lanes ÷ whole paths and the lanes' agreement with whole paths."""
     if "lanes" not in ns:
         return {k: float("nan") for k in ("lanes_ns", "embree_lanes_ns", "embree1_ns",
                                           "embree16_ns", "lanes_other_ns",
                                           "lanes_embree_share", "lanes_over_whole",
                                           "lanes_paths_differing", "lanes_per_packet")}
-    own = ns["embree16"] if lane_paths.PACKETS else ns["embree1"]
+    own = ns["embree16"] if lane_paths.PACKETS and not bodies else ns["embree1"]
     return {"lanes_ns": ns["lanes"], "embree_lanes_ns": own, "embree1_ns": ns["embree1"],
             "embree16_ns": ns["embree16"],
             "lanes_other_ns": ns["lanes"] - own,

@@ -1,7 +1,7 @@
 """core/render/lane_paths.py: sixteen Lambert paths at a time in SIMD lanes, for static
 scenes (flat or smooth-shaded, with or without image textures: base colour, roughness,
 normal and emission; lit by emissive triangles, point, spot and sun lights, a constant
-sky or a colour environment map).
+sky or a colour environment map) and for scenes with moving bodies under lights at rest.
 
 Its estimator is whole_paths.py's (and the wavefront integrator's), with the same random
 numbers, so the three must give the same radiance path by path (to float32 rounding: a
@@ -18,6 +18,7 @@ from test_environment import write_spectral_map
 from test_whole_paths import (
     _checker,
     _delta_lights,
+    _moving_room,
     _sky,
     _textures,
     camera_paths,
@@ -105,7 +106,25 @@ def _map_scene(scene: str, spectral: str, folder, **render) -> dict:
     return data
 
 
+def _moving_everything(data):
+    """The room moves at 0.3 c (one body, the light at rest), a static smooth-shaded ball
+    stands in it, under a constant sky, with point, spot and sun lights: every kind of
+    vertex and light the moving lanes handle."""
+    _moving_room(data)
+    for change in (_vertex_normals, _sky, _delta_lights):
+        change(data)
+
+
 def lane_scene(scene: str, spectral: str, beta: float, folder=None, **render) -> dict:
+    if scene.startswith("cornell+"):  # test_whole_paths' scenes (moving bodies)
+        data = scene_data(folder, scene, spectral, beta)
+        data["render"].update(render)
+        return data
+    if scene == "moving_everything":
+        data = cornell(spectral=spectral, spp=8, **render)
+        data["motion"]["beta"] = [0.0, beta, 0.0]
+        _moving_everything(data)
+        return data
     if scene.startswith("environment"):
         data = _map_scene(scene, spectral, folder, **render)
         data["motion"]["beta"] = [0.0, beta, 0.0]
@@ -185,31 +204,81 @@ def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
         assert np.all(L1[t1 >= 1e30] == 0.0) == (not seen)
 
 
+@pytest.mark.parametrize("scene,spectral,beta,render", [
+    ("cornell+moving_blocks", "cie1931", 0.6, {}), ("cornell+moving_blocks", "rgb", 0.0, {}),
+    ("cornell+moving_blocks", "cie1931", 0.0, {"max_depth": 2}),
+    ("cornell+moving_room", "cie1931", 0.3, {}),
+    ("cornell+moving_room", "seed-gaussian", 0.0, {}),
+    ("cornell+moving_room", "cie1931", 0.4, {"doppler": False}),
+    ("cornell+moving_room", "cie1931", 0.4, {"searchlight": False}),
+    ("moving_everything", "cie1931", 0.5, {}), ("moving_everything", "rgb", 0.0, {})])
+def test_lanes_trace_moving_bodies_as_whole_paths_do_path_by_path(
+        tmp_path, scene, spectral, beta, render):
+    """Moving bodies under lights at rest: each lane's rays traced alone through the
+    bodies' rest frames, the frame changes as lane arithmetic (the shift's logarithm as
+    straight-line code): the radiance, the camera rays' distances and segments and the
+    numbers of rays of whole paths and of the wavefront integrator, path by path. The
+    blocks as two bodies (most bounces leave one body for the static room), the room as
+    one (most land on the body they left: its rest-frame form is reused), without the
+    Doppler shift or the searchlight factor, a static smooth ball, the sky and delta
+    lights in a moving room."""
+    fr, ev = renderer(lane_scene(scene, spectral, beta, tmp_path, **render), tmp_path)
+    assert fr.whole_paths and fr.lane_paths
+    assert lane_paths.kind(fr.kernel, fr.prep.tracer)[4]
+    assert fr.kernel.shift == render.get("doppler", spectral != "rgb")
+    keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
+    depth, t0, n = fr.settings.max_depth, float(ev.t), len(keys)
+    L1, t1 = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32)
+    s1 = np.full(n, 99, np.int32)
+    rays1 = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu, nlanes, depth,
+                                  L1, t1, first_seg=s1, t0=t0)
+    L2, t2, s2 = np.zeros((n, 4), np.float32), np.zeros(n, np.float32), np.zeros(n, np.int32)
+    rays2 = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
+                                      np.zeros(n, np.float32), nlanes, depth, True, L2, t2,
+                                      s2, t0)
+    L3, t3, s3, _ = trace(fr.kernel, fr.prep.tracer, depth, keys, o.copy(), d.copy(), lamu,
+                          nlanes, t0=t0)
+    assert np.all(np.isfinite(L1)) and L1[:, :nlanes].sum() > 0.0
+    assert whole_paths.paths_differing(L1[:, :nlanes], L2[:, :nlanes]) <= 0.005
+    assert whole_paths.paths_differing(L1[:, :nlanes], L3[:, :nlanes]) <= 0.005
+    assert distances_differing(t1, t2) <= 0.005 and distances_differing(t1, t3) <= 0.005
+    assert np.mean(s1 != s2) <= 0.005 and np.mean(s1 != s3) <= 0.005
+    assert np.any(s1 >= 0) and np.all(s1[t1 >= 1e30] == -1)
+    n_rays, n_shadow, packets = rays1
+    assert abs(n_rays - rays2[0]) <= 0.005 * n_rays
+    assert abs(n_shadow - rays2[1]) <= 0.005 * n_shadow + 1
+    assert n_rays / 16 <= packets < n_rays / 16 + 64
+
+
 def distances_differing(a: np.ndarray, b: np.ndarray) -> float:
     """The share of camera rays whose hit distances differ by more than 1e-5 relative."""
     return float(np.mean(np.abs(a - b) > 1e-5 * np.maximum(np.abs(a), np.abs(b))))
 
 
+@pytest.mark.parametrize("scene", ["everything", "moving_everything"])
 @pytest.mark.parametrize("n", [1, 5, 15, 17])
-def test_fewer_paths_than_lanes(tmp_path, n):
+def test_fewer_paths_than_lanes(tmp_path, n, scene):
     """A chunk of fewer paths than the 16 lanes (or one more): the lanes that never get a
     path run through the lane loops with defined state (uninitialised table columns
     crashed the stress suite's 1-pixel render) and the paths that exist are traced as
-    whole paths trace them."""
-    fr, ev = renderer(lane_scene("everything", "cie1931", 0.0), tmp_path)
+    whole paths trace them; with moving bodies too."""
+    fr, ev = renderer(lane_scene(scene, "cie1931", 0.3), tmp_path)
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     pick = np.linspace(0, len(keys) - 1, n).astype(np.int64)
     keys, o, d, lamu = keys[pick], o[pick], d[pick], np.ascontiguousarray(lamu[pick])
-    depth = fr.settings.max_depth
-    L1, t1 = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32)
+    depth, t0 = fr.settings.max_depth, float(ev.t)
+    L1, t1, s1 = np.full((n, 4), np.nan, np.float32), np.zeros(n, np.float32), np.zeros(n, np.int32)
     n_rays, _, packets = lane_paths.lane_trace(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
-                                               nlanes, depth, L1, t1)
-    L2, t2 = np.zeros((n, 4), np.float32), np.zeros(n, np.float32)
+                                               nlanes, depth, L1, t1, first_seg=s1, t0=t0)
+    L2, t2, s2 = np.zeros((n, 4), np.float32), np.zeros(n, np.float32), np.zeros(n, np.int32)
     rays2 = whole_paths.lambert_paths(fr.kernel, fr.prep.tracer, keys, o, d, lamu,
-                                      np.zeros(n, np.float32), nlanes, depth, True, L2, t2)
+                                      np.zeros(n, np.float32), nlanes, depth, True, L2, t2,
+                                      s2, t0)
     assert np.all(np.isfinite(L1))
     assert whole_paths.paths_differing(L1, L2) == 0.0 and n_rays == rays2[0]
     assert distances_differing(t1, t2) == 0.0 and packets >= 1
+    if scene.startswith("moving"):
+        np.testing.assert_array_equal(s1, s2)
 
 
 def test_packets_and_rays_one_at_a_time_trace_the_same_paths(tmp_path):
@@ -271,15 +340,19 @@ def _no_light(data):
     data["objects"] = [o for o in data["objects"] if o["name"] != "ceiling_light"]
 
 
-@pytest.mark.parametrize("change", [_no_light, "spectral map", "moving"])
+@pytest.mark.parametrize("change", [_no_light, "spectral map", "cornell+moving_light",
+                                    "cornell+moving_all", "cornell+moving_textured",
+                                    "environment+moving"])
 def test_scenes_that_need_more_take_scalar_whole_paths(tmp_path, change):
+    """No light to sample, a spectral map's bands; with moving bodies a moving light (of
+    another body or of the vertex's own), textures or a map: whole paths."""
     if change == "spectral map":  # its bands are interpolated at each λ: whole paths
         data = environment_scene(tmp_path)
         write_spectral_map(tmp_path / "bands.exr", [400.0, 550.0, 700.0],
                            np.full((4, 8, 3), 0.5))
         data["scene"]["environment"] = {"file": "bands.exr"}
-    elif change == "moving":
-        data = scene_data(tmp_path, "cornell+moving_blocks", "cie1931", 0.0)
+    elif isinstance(change, str):
+        data = scene_data(tmp_path, change, "cie1931", 0.0)
     else:
         data = cornell()
         change(data)
@@ -294,7 +367,8 @@ def test_denoising_features_leave_the_lanes(tmp_path):
     assert not lane_paths.applies(fr.kernel, fr.prep.tracer, True)
 
 
-@pytest.mark.parametrize("scene", ["cornell", "textures", "environment"])
+@pytest.mark.parametrize("scene", ["cornell", "textures", "environment",
+                                   "cornell+moving_blocks"])
 def test_the_renderer_takes_the_lanes_and_its_image_is_that_of_whole_paths(tmp_path, scene):
     # (with textures: the renderer gives the lanes its camera rays' spread, as to whole
     # paths, so the levels of detail agree)

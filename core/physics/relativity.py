@@ -603,6 +603,26 @@ def check_beta(beta: object, key: str = "motion.beta") -> np.ndarray:
 
 
 # ----------------------------------------------------------------- per-ray kernel form
+@njit(nogil=True, error_model="numpy", inline="always")
+def aberrate_doppler_lane(dx, dy, dz, hx, hy, hz, b, omb, inv_g):
+    """:func:`aberrate_doppler_ray` for a caller compiled with reassociation (the SIMD
+    lanes, ``render/lane_paths.py``, whose ``fastmath`` allows it; inlined there, so a
+    loop of it is vector code, where a call would leave the loop scalar): the same
+    forms, with 1 − b given (``omb``, exact in the caller's table) instead of computed,
+    so no cancellation depends on the order of an addition (reassociated,
+    (1 − b) − |c|²/2 could become 1 − (b + |c|²/2), which loses 1 − cos θ' as b → 1).
+    Returns (unit d_lab, D)."""
+    cx, cy, cz = dx - hx, dy - hy, dz - hz
+    omc = 0.5 * (cx * cx + cy * cy + cz * cz)
+    ch = cx * hx + cy * hy + cz * hz
+    a = omb - omc
+    lx = a * hx + inv_g * (cx - ch * hx)
+    ly = a * hy + inv_g * (cy - ch * hy)
+    lz = a * hz + inv_g * (cz - ch * hz)
+    inv = 1.0 / (omb + b * omc)  # 1 / |l| = 1 / (1 - β·d')
+    return lx * inv, ly * inv, lz * inv, inv_g * inv
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def aberrate_doppler_ray(dx, dy, dz, hx, hy, hz, b, inv_g):
     """One camera-frame view d' -> (unit d_lab, D), for the kernels (numba, float64).
@@ -614,17 +634,10 @@ def aberrate_doppler_ray(dx, dy, dz, hx, hy, hz, b, inv_g):
     That vector's length is 1 - β·d' itself (with x = cos θ': |c_⊥|² = 1 - x² and
     a = x - b, so a² + (1 - b²)(1 - x²) = (1 - b x)²): one division normalises it and
     gives D, no square root. Call only for b > 0 (at β = 0, d_lab = d' and D = 1
-    exactly).
+    exactly). (:func:`aberrate_doppler_lane` with 1 − b computed here, without
+    reassociation.)
     """
-    cx, cy, cz = dx - hx, dy - hy, dz - hz
-    omc = 0.5 * (cx * cx + cy * cy + cz * cz)
-    ch = cx * hx + cy * hy + cz * hz
-    a = (1.0 - b) - omc
-    lx = a * hx + inv_g * (cx - ch * hx)
-    ly = a * hy + inv_g * (cy - ch * hy)
-    lz = a * hz + inv_g * (cz - ch * hz)
-    inv = 1.0 / ((1.0 - b) + b * omc)  # 1 / |l| = 1 / (1 - β·d')
-    return lx * inv, ly * inv, lz * inv, inv_g * inv
+    return aberrate_doppler_lane(dx, dy, dz, hx, hy, hz, b, 1.0 - b, inv_g)
 
 
 def beta_kernel_args(beta: ArrayLike) -> tuple[float, float, float, float, float]:

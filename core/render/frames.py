@@ -273,9 +273,10 @@ class FrameRenderer:
         # a scene of Lambert surfaces (no alpha masks, no area-light quads), moving or not:
         # whole paths in one kernel call (whole_paths.py), else the wavefront integrator
         self.whole_paths = whole_paths.applies(self.kernel, prep.tracer, self.features)
-        # ... and of those, a static one with a light to sample (a spectral map's bands
-        # excepted): sixteen paths at a time in SIMD lanes
-        # (lane_paths.py; either flag False turns to the next integrator)
+        # ... and of those, one with a light to sample (a spectral map's bands excepted;
+        # with moving bodies, lights at rest and no map or textures): sixteen paths at a
+        # time in SIMD lanes (lane_paths.py; either flag False turns to the next
+        # integrator)
         self.lane_paths = self.whole_paths and lane_paths.applies(self.kernel, prep.tracer,
                                                                    self.features)
         self._chunk_buffers: list[dict] = []   # wavefront buffer sets, see _trace_chunk
@@ -424,7 +425,7 @@ class FrameRenderer:
                                              o_local, d_lab, lamu, nlanes,
                                              sky_seen=not s.transparent,
                                              buffers=keep.setdefault("whole", {}),
-                                             spread=spread)
+                                             spread=spread, t0=float(event.t))
         elif self.whole_paths:
             L, t_hit, seg = whole_paths.trace(self.kernel, prep.tracer, s.max_depth, keys,
                                               o_local, d_lab, lamu, nlanes,

@@ -58,9 +58,11 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ..physics.rgb_table import lambda_of_grid_column
+from ..physics.relativity import aberrate_doppler_lane
+from ..physics.rgb_table import doppler_columns, lambda_of_grid_column
 from ..scene.geometry import ray_offset_at
 from . import lights as lightmod
+from . import rest_frames as rf
 from . import whole_paths
 from .accel import MISS_DISTANCE, Accel
 from .embree import (
@@ -100,12 +102,14 @@ from .integrator import (
     KernelScene,
     column,
     face_forward,
+    lab_offset,
     offset_point,
     shading_normal,
     vertex_normal,
     wavefront_buffers,
 )
 from .prefetch import prefetch_row
+from .rest_frames import MovingScene, blocked_ray, nearest_one, static_query_args
 from .sampling import (
     DIM_BSDF,
     DIM_LIGHT,
@@ -142,11 +146,16 @@ TRIANGLE_LIGHTS, ANY_LIGHTS, MAP_LIGHT = 0, 1, 2
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     """Whether :func:`lane_paths` can trace the scene ``sc``: one where
     :func:`.whole_paths.applies` (Lambert, no alpha mask, no area-light quad, no
-    denoising features) whose BVH is static, under a colour environment map or none (a
-    spectral map's bands stay with whole paths; image textures may be there), and with a
-    light to sample (emissive triangles, point, spot or sun lights, the constant sky, the
-    map)."""
-    return (isinstance(accel, Accel) and whole_paths.applies(sc, accel, features)
+    denoising features), under a colour environment map or none (a spectral map's bands
+    stay with whole paths), with a light to sample (emissive triangles, point, spot or
+    sun lights, the constant sky, the map), and either static (its BVH an
+    :class:`.accel.Accel`; image textures may be there) or with moving bodies (a
+    :class:`.rest_frames.MovingScene`) whose lights all rest in the lab, without a map
+    or image textures (those stay with whole paths)."""
+    moving = isinstance(accel, MovingScene)
+    if moving and (sc.env_on or sc.tex.enabled or bool(np.any(np.asarray(sc.l_seg) >= 0))):
+        return False
+    return ((moving or isinstance(accel, Accel)) and whole_paths.applies(sc, accel, features)
             and (not sc.env_on or len(sc.env_nm) == 0) and len(sc.l_kind) > 0)
 
 
@@ -471,6 +480,108 @@ def pick_texels(env, guides, l_cdf, ua, pos, cont, etex):  # pragma: no cover - 
 
 
 @njit(**_LANES)
+def trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one,
+                 rest1):  # pragma: no cover - compiled
+    """Each lane's nearest hit among the static BVH and the moving bodies' segments,
+    lane by lane (:func:`.rest_frames.nearest_one`: the lane's ray from its origin
+    event, in each body's rest frame, its own rest-frame form for the body it leaves),
+    written into the packet's words as Embree would write them (tfar, u, v, primID,
+    geomID 0, or ``RTC_INVALID_GEOMETRY_ID`` on a miss), the segment hit into the
+    bodies' ``seg`` row (-1: the static scene or none). ``one``: an ``RTCRayHit`` on the
+    kernel's stack; ``rest1``: one lane's rest-frame form."""
+    handle, box_lo, box_hi, segs = tracer
+    _, r_t, r_seg, _, rest, seg = bodies[:6]
+    f = one.view(np.float32)
+    addr = one.ctypes.data
+    for lane in range(W):
+        valid[lane] = -1 if path[lane] >= 0 else 0
+        seg[lane] = -1
+        hit[GEOM * W + lane] = _INVALID
+        hitf[TFAR * W + lane] = MISS_DISTANCE
+        if path[lane] < 0:
+            continue
+        for c in range(7):
+            rest1[0, c] = rest[c, lane]
+        t, tri, b1, b2, sg = nearest_one(handle, box_lo, box_hi, segs, f, one, addr,
+                                         ray[0, lane], ray[1, lane], ray[2, lane],
+                                         ray[3, lane], ray[4, lane], ray[5, lane],
+                                         r_t[lane], r_seg[lane], rest1)
+        hitf[TFAR * W + lane] = t
+        hitf[HIT_U * W + lane], hitf[HIT_V * W + lane] = b1, b2
+        if tri >= 0:
+            hit[PRIM * W + lane], hit[GEOM * W + lane] = np.uint32(tri), np.uint32(0)
+            seg[lane] = sg
+
+
+@njit(**_LANES)
+def enter_bodies(seg_f, shift, beam, top, hitf, lanes, bodies):  # pragma: no cover - compiled
+    """The frame change at each lane's hit (:func:`.whole_paths.lambert_paths`' and
+    :func:`.integrator.shade`'s): on a moving body (segment ``seg`` ≥ 0, velocity u = b h,
+    1/γ) the ray's direction aberrated into its rest frame S_u, the throughput × D_u⁵
+    (``beam``) with D_u = 1/(γ (1 + u·d)), and the lanes shifted by ln(D_u · D_pend) ·
+    INV_DLOG (``shift``: the pending shift of the last body's D_out with it; one
+    logarithm, :func:`..physics.rgb_table.doppler_columns`); back on the body the ray
+    left, its rest-frame form's direction and D_u = 1/D_out, no shift (the pending one
+    cancels); anywhere else (a static hit, a miss) the pending shift alone. The lanes'
+    columns follow their shifted table coordinates; the lab point of the hit, its lab
+    time and the body's frame (h, b, 1/γ, γ, γ²/(γ + 1), 1 − b) are kept for the bounce.
+    Straight-line code over the lanes: both branches computed, the lane's chosen by
+    selects."""
+    _, _, _, ray, thr, li, lf, _, _ = lanes
+    lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev = bodies[:9]
+    for lane in range(W):
+        sg = seg[lane]
+        moving = sg >= 0
+        s = np.uint64(max(sg, 0))
+        hx, hy, hz = seg_f[s, rf.H], seg_f[s, rf.H + 1], seg_f[s, rf.H + 2]
+        b, ig, omb = seg_f[s, rf.B], seg_f[s, rf.IG], seg_f[s, rf.OMB]
+        frame[0, lane], frame[1, lane], frame[2, lane] = hx, hy, hz
+        frame[3, lane], frame[4, lane] = b, ig
+        frame[5, lane], frame[6, lane], frame[7, lane] = seg_f[s, rf.G], seg_f[s, rf.C], omb
+        t = hitf[TFAR * W + lane]
+        ox, oy, oz = ray[0, lane], ray[1, lane], ray[2, lane]
+        dx, dy, dz = ray[3, lane], ray[4, lane], ray[5, lane]
+        p_lab[0, lane] = np.float64(ox + t * dx)
+        p_lab[1, lane] = np.float64(oy + t * dy)
+        p_lab[2, lane] = np.float64(oz + t * dz)
+        t_ev[lane] = r_t[lane] - t
+        same = moving and r_seg[lane] == sg
+        rx, ry, rz, d_u = aberrate_doppler_lane(dx, dy, dz, -hx, -hy, -hz, b, omb, ig)
+        d_in = 1.0 / np.float64(rest[6, lane]) if same else d_u
+        k5 = d_in * d_in * d_in * d_in * d_in if beam and moving else 1.0
+        d_shift = d_u * pend[lane] if moving else pend[lane]
+        cols = doppler_columns(1.0 if same else d_shift) if shift else 0.0
+        ray[3, lane] = (rest[3, lane] if same else np.float32(rx)) if moving else dx
+        ray[4, lane] = (rest[4, lane] if same else np.float32(ry)) if moving else dy
+        ray[5, lane] = (rest[5, lane] if same else np.float32(rz)) if moving else dz
+        pend[lane] = 1.0
+        for j in range(4):
+            thr[j, lane] *= k5
+            lam[j, lane] += cols
+            li[j, lane], lf[j, lane] = column(lam[j, lane], top)
+
+
+@njit(**_LANES)
+def block_bodies(tracer, svalid, shadow, shadowf, bodies, one):  # pragma: no cover - compiled
+    """Each valid shadow ray of the packet, lane by lane, against the static BVH and the
+    moving bodies at the time it passes them (:func:`.rest_frames.blocked_ray` from the
+    lane's origin event ``t_sh``): a blocked lane's tfar becomes -inf, as with
+    ``rtcOccluded16``."""
+    handle, box_lo, box_hi, segs = tracer
+    t_sh = bodies[9]
+    f = one.view(np.float32)
+    addr = one.ctypes.data
+    for lane in range(W):
+        if svalid[lane] == 0:
+            continue
+        if blocked_ray(handle, box_lo, box_hi, segs, f, one, addr, shadowf[lane],
+                       shadowf[W + lane], shadowf[2 * W + lane], shadowf[4 * W + lane],
+                       shadowf[5 * W + lane], shadowf[6 * W + lane], shadowf[TFAR * W + lane],
+                       t_sh[lane]):
+            shadowf[TFAR * W + lane] = -np.inf
+
+
+@njit(**_LANES)
 def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
     """Each lane's light by the CDF: ``pos`` = #{k: cdf[k] ≤ u} (u = ``ua[0]``,
     ``lights.select``'s searchsorted). Up to :data:`LINEAR_LIGHTS` entries that count
@@ -500,7 +611,8 @@ def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
 
 @njit(**_LANES)
 def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, lights, env_on,
-                 env, etex, evals, ub):  # pragma: no cover - compiled
+                 env, etex, evals, ub, moving, bodies,
+                 frames_of):  # pragma: no cover - compiled
     """Each lane's next-event estimation towards its light (the shadow ray into the
     ``RTCRay16`` ``shadow``, valid where the sample counts; its contribution thr ρ/π
     cos θ_i w L_e / p_light into ``nee``), then its continuation, cosine-weighted about
@@ -511,13 +623,26 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
     (:func:`pick_texels`), its pdf, and the texel's radiance at its λ (``evals``' first
     four rows, :func:`texel_values`). ``lights``: the scene's kind of lights
     (:data:`TRIANGLE_LIGHTS`, :data:`ANY_LIGHTS`, :data:`MAP_LIGHT`: then no other
-    light's sample is made, which cost 28 ns per path on the environment-lit scene)."""
+    light's sample is made, which cost 28 ns per path on the environment-lit scene).
+
+    With moving bodies (``moving``; ``bodies``: the lanes' rows of :func:`lane_paths`,
+    ``frames_of``: (ε's base, ``shift``, ``beam``, the tables' last column)), a lane on a
+    body shades in its rest frame S_u (:func:`enter_bodies`), as
+    :func:`.whole_paths.lambert_paths` does: its light (at rest in the lab) sampled from
+    the hit's lab point, the direction seen in S_u, D_l = γ (1 + u·w) (the pdf × D_l², the
+    contribution × D_l⁵ with ``beam``, the light's spectrum at D_l λ with ``shift``), the
+    shadow ray from the offset point's lab event; the continuation turned back into the
+    lab (× D_out⁵, its pdf / D_out², the lanes' shift by D_out pending until the next
+    hit), the next ray from the offset point's lab event, its rest-frame form kept for
+    the body it leaves."""
     v0, e1, e2, ng, area, tri_mat = geo[:6]
     (_, emit, _, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
      l_cdf) = mats[:-2]
     _, _, depth, ray, thr, li, lf, _, prev_pdf = lanes
     pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive = bounce
     env_tex, env_marg, env_cond, env_pmf, env_rot = env
+    lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh = bodies
+    eps_base, shift, beam, top = frames_of
     h_e, w_e = env_tex.shape[0], env_tex.shape[1]
     lane4 = 1.0 if nlanes == 4 else 0.0
     for lane in range(eps.shape[0]):
@@ -529,6 +654,20 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
         gx, gy, gz = gn[0, lane], gn[1, lane], gn[2, lane]
         nx, ny, nz = nrm[0, lane], nrm[1, lane], nrm[2, lane]
         ep = eps[lane]
+        # the point the light is sampled from: on a moving body its lab point
+        sx_, sy_, sz_, s_ep = px, py, pz, ep
+        on_body = False
+        hx = hy = hz = b = ig = gam = cg = omb = plx = ply = plz = 0.0
+        if moving:
+            on_body = seg[lane] >= 0
+            hx, hy, hz = frame[0, lane], frame[1, lane], frame[2, lane]
+            b, ig, gam, cg = frame[3, lane], frame[4, lane], frame[5, lane], frame[6, lane]
+            omb = frame[7, lane]
+            plx, ply, plz = p_lab[0, lane], p_lab[1, lane], p_lab[2, lane]
+            sx_ = plx if on_body else np.float64(px)
+            sy_ = ply if on_body else np.float64(py)
+            sz_ = plz if on_body else np.float64(pz)
+            s_ep = ray_offset_at(eps_base, plx, ply, plz) if on_body else ep
         if lights == MAP_LIGHT:  # the map's own sample below is the only one
             (wx, wy, wz), p_l, scale, delta, finite, target, ok = (
                 (0.0, 0.0, 1.0), 0.0, 0.0, False, False, (0.0, 0.0, 0.0), False)
@@ -536,12 +675,13 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
             (wx, wy, wz), p_l, scale, delta, finite, target, ok = lightmod.sample_light(
                 lightmod.light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot, v0,
                                       e1, e2, ng, area, tri_mat, one_sided),
-                p_sel, u1, ua[1, lane], px, py, pz, ep)
+                p_sel, u1, ua[1, lane], sx_, sy_, sz_, s_ep)
         else:  # emissive triangles only
             (wx, wy, wz), p_l, target, ok = lightmod.sample_triangle(
                 (v0[lt, 0], v0[lt, 1], v0[lt, 2]), (e1[lt, 0], e1[lt, 1], e1[lt, 2]),
                 (e2[lt, 0], e2[lt, 1], e2[lt, 2]), (ng[lt, 0], ng[lt, 1], ng[lt, 2]),
-                area[lt], one_sided[tri_mat[lt]], p_sel, u1, ua[1, lane], px, py, pz, ep)
+                area[lt], one_sided[tri_mat[lt]], p_sel, u1, ua[1, lane], sx_, sy_, sz_,
+                s_ep)
             scale, delta, finite = np.float64(l_scale[k]), False, True
         is_env = False
         r_e, c_e = etex[0, lane], etex[1, lane]
@@ -557,14 +697,33 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
             delta = False if is_env else delta
             finite = False if is_env else finite
             ok = p_e > 0.0 if is_env else ok
-        cos_i = wx * nx + wy * ny + wz * nz
+        # the light's direction in the vertex's frame; D_l its spectrum's Doppler factor
+        vx, vy, vz = wx, wy, wz
+        d_l = 1.0
+        if moving:  # on a body: seen in S_u, w_u and D_l = γ (1 + u·w)
+            ux, uy, uz, inv_dl = aberrate_doppler_lane(wx, wy, wz, -hx, -hy, -hz, b, omb, ig)
+            d_l = 1.0 / inv_dl if on_body else 1.0
+            vx, vy, vz = (ux, uy, uz) if on_body else (wx, wy, wz)
+            p_l = p_l * d_l * d_l if on_body else p_l
+        cos_i = vx * nx + vy * ny + vz * nz
         go = (cont[lane] and ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0
-              and wx * gx + wy * gy + wz * gz > 0.0)
+              and vx * gx + vy * gy + vz * gz > 0.0)
         c = (1.0 if delta else power_heuristic(p_l, cos_i * _INV_PI)) * cos_i * scale / p_l \
             * _INV_PI
         # the shadow ray (integrator.shadow_ray): to a finite light's target, shortened by
-        # 1e-4 of its length; else along wi, 1e30 long
-        ox, oy, oz = offset_point((px, py, pz), (gx, gy, gz), ep, 1.0)
+        # 1e-4 of its length; else along wi, 1e30 long; on a body from the offset point's
+        # lab event
+        o_off = offset_point((px, py, pz), (gx, gy, gz), ep, 1.0)
+        ox, oy, oz = o_off
+        if moving:
+            if beam and on_body:  # the spectrum × D_l⁵
+                c *= d_l * d_l * d_l * d_l * d_l
+            (qx, qy, qz), dt_o = lab_offset((plx, ply, plz), (gx, gy, gz), ep, 1.0,
+                                            (hx, hy, hz), b, gam, cg)
+            ox = qx if on_body else np.float64(ox)
+            oy = qy if on_body else np.float64(oy)
+            oz = qz if on_body else np.float64(oz)
+            t_sh[lane] = t_ev[lane] + dt_o if on_body else t_ev[lane]
         sx, sy, sz = target[0] - ox, target[1] - oy, target[2] - oz
         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
         set_packet_ray(shadowf, shadow, lane, np.float32(ox), np.float32(oy), np.float32(oz),
@@ -574,33 +733,60 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
                        np.float32(sl * (1.0 - 1e-4) if finite else 1e30))
         svalid[lane] = -1 if go else 0
         lrow = l_row[np.uint64(k)]
-        q = 0.0
-        for j in range(4):
-            r = rho[j, lane]
-            le = lane_lerp(emit, lrow, li[j, lane], lf[j, lane])
-            if env_on:
-                le = evals[j, lane] if is_env else le
-            nee[j, lane] = thr[j, lane] * r * c * le
-            thr[j, lane] *= r
-            q = max(q, thr[j, lane] if j < 3 else thr[j, lane] * lane4)
-        # the continuation: cosine-weighted about n, refused below g
+        # the continuation: cosine-weighted about n, refused below g; off a body turned
+        # back into the lab
         b_1, b_2 = ub[0, lane], ub[1, lane]
         lx, ly, lz = cosine_hemisphere(b_1, b_2)
         tb, bb = onb(nx, ny, nz)
         nx, ny, nz = to_world(lx, ly, lz, tb, bb, nx, ny, nz)
         pdf = lz * _INV_PI
         onward = cont[lane] and pdf > 0.0 and nx * gx + ny * gy + nz * gz > 0.0
+        k5 = d_out = 1.0
+        wlx, wly, wlz = nx, ny, nz
+        l_cols = 0.0
+        if moving:
+            lwx, lwy, lwz, d_o = aberrate_doppler_lane(nx, ny, nz, hx, hy, hz, b, omb, ig)
+            wlx = lwx if on_body else nx
+            wly = lwy if on_body else ny
+            wlz = lwz if on_body else nz
+            d_out = d_o if on_body else 1.0
+            k5 = d_out * d_out * d_out * d_out * d_out if beam else 1.0
+            l_cols = doppler_columns(d_l) if shift else 0.0
+        q = 0.0
+        for j in range(4):
+            r = rho[j, lane]
+            if moving:  # the light's spectrum at D_l λ (at a static vertex the lane's own)
+                lc, lfc = column(lam[j, lane] + l_cols, top)
+                le = lane_lerp(emit, lrow, lc, lfc)
+            else:
+                le = lane_lerp(emit, lrow, li[j, lane], lf[j, lane])
+            if env_on:
+                le = evals[j, lane] if is_env else le
+            nee[j, lane] = thr[j, lane] * r * c * le
+            thr[j, lane] *= r
+            if moving:
+                thr[j, lane] *= k5
+            q = max(q, thr[j, lane] if j < 3 else thr[j, lane] * lane4)
         roulette = dep + 1 >= RR_DEPTH and q < 1.0
         survive = not roulette or ub[2, lane] < q
         for j in range(4):
             thr[j, lane] = thr[j, lane] / q if roulette else thr[j, lane]
         alive[lane] = onward and survive
-        prev_pdf[lane] = pdf
+        prev_pdf[lane] = pdf / (d_out * d_out) if moving else pdf
         ray[0, lane], ray[1, lane], ray[2, lane] = ox, oy, oz
-        ray[3, lane] = np.float32(nx)
-        ray[4, lane] = np.float32(ny)
-        ray[5, lane] = np.float32(nz)
+        ray[3, lane] = np.float32(wlx)
+        ray[4, lane] = np.float32(wly)
+        ray[5, lane] = np.float32(wlz)
         depth[lane] = dep + 1
+        if moving:  # the next ray's origin event, its rest-frame form on the body it leaves
+            r_t[lane] = t_sh[lane]
+            r_seg[lane] = seg[lane]
+            pend[lane] = d_out if shift else 1.0
+            rest[0, lane], rest[1, lane], rest[2, lane] = o_off
+            rest[3, lane] = np.float32(nx)
+            rest[4, lane] = np.float32(ny)
+            rest[5, lane] = np.float32(nz)
+            rest[6, lane] = np.float32(d_out)
 
 
 @njit(**_LANES)
@@ -612,32 +798,37 @@ def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
             acc[j, lane] += nee[j, lane] if seen else 0.0
 
 
-def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
-             native16: bool) -> Any:
+def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: bool,
+             moving: bool) -> Any:
     """The lane kernel for one kind of scene (:func:`kernel`): ``smooth`` vertex normals,
     ``lights`` emissive triangles only (:data:`TRIANGLE_LIGHTS`), other lights too (point,
     spot, sun, the constant sky, the map: :data:`ANY_LIGHTS`) or the map alone
     (:data:`MAP_LIGHT`), ``textured`` image textures (:func:`texture_lanes`), ``env_on`` an
     environment map (:func:`env_misses`, :func:`pick_texels`), ``native16`` the rays
-    as Embree's 16-ray packets (else one at a time: :data:`PACKETS`). The five are
-    constants of the compiled code: LLVM drops the branches they close, so the Cornell
-    box's lanes carry no normal interpolation, no light kinds it does not have and no
-    texture lookups (numba's on-disk cache keys each variant by its closure's values)."""
+    as Embree's 16-ray packets (else one at a time: :data:`PACKETS`), ``moving`` moving
+    bodies (each lane's rays traced alone through their rest frames,
+    :func:`trace_bodies`, :func:`block_bodies`; the frame changes :func:`enter_bodies`
+    and :func:`sample_lanes`'). The six are constants of the compiled code: numba and
+    LLVM drop the branches they close, so the Cornell box's lanes carry no normal
+    interpolation, no light kinds it does not have, no texture lookups and no frame
+    change (numba's on-disk cache keys each variant by its closure's values)."""
 
     @njit(cache=True, nogil=True, error_model="numpy", fastmath=FAST_MATH, _nrt=False)
-    def lane_paths(handle, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
+    def lane_paths(tracer, v0, e1, e2, ng, area, vn, has_vn, tri_mat, mat_alpha, refl, emit,
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
                    l_cdf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_mguide,
-                   env_cguide, env_pmf, env_rot, env_row, eps_base, tex, tri_rec, keys, o, d,
-                   lamu, spread, nlanes, max_depth, sky_seen, L, first_t,
-                   log):  # pragma: no cover - compiled
-        """:func:`lane_trace`'s kernel: the scene's arrays (:class:`.integrator.KernelScene`'s,
-        the BVH's ``RTCScene`` handle), then the paths (keys, camera rays, lanes' table
-        coordinates, the camera rays' spread angles: read with textures only), the outputs
-        and the packet log (:data:`NO_LOG`: none kept). Returns (nearest-hit rays, shadow
-        rays, packets)."""
+                   env_cguide, env_pmf, env_rot, env_row, eps_base, tex, tri_rec, seg_f,
+                   shift, beam, keys, o, d, lamu, spread, nlanes, max_depth, sky_seen, t0, L,
+                   first_t, first_seg, log):  # pragma: no cover - compiled
+        """:func:`lane_trace`'s kernel: the tracer (:meth:`.rest_frames.MovingScene.query_args`
+        or :func:`.rest_frames.static_query_args`: the BVH's ``RTCScene`` handle first),
+        the scene's arrays (:class:`.integrator.KernelScene`'s), then the paths (keys,
+        camera rays, lanes' table coordinates, the camera rays' spread angles: read with
+        textures only), the camera rays' origin lab time, the outputs and the packet log
+        (:data:`NO_LOG`: none kept). Returns (nearest-hit rays, shadow rays, packets)."""
         n_paths = keys.shape[0]
         top = emit.shape[1] - 1
+        handle = tracer[0]
         # the packets and the lanes' arrays live on the stack (sizes for W = 16: literals)
         hit = stack_array(1, 384, np.uint32)[0]
         hitf = hit.view(np.float32)
@@ -682,6 +873,22 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
         texels = (stack_array(4, 16, np.int64), stack_array(3, 16, np.float64))
         co = stack_array(4, 16, np.float64)
         evals = stack_array(16, 16, np.float64)
+        # with moving bodies: each lane's table coordinates (shifted in each body's rest
+        # frame), its ray's origin lab time, the segment whose body it leaves (-1: none),
+        # the D_out whose shift waits for the next hit, the ray's rest-frame form there
+        # (origin, direction, D_out: rest_frames.nearest_ray); one bounce's segment hit,
+        # the body's frame (h, b, 1/γ, γ, γ²/(γ + 1), 1 − b), the hit's lab point and time, the
+        # shadow ray's origin lab time; an RTCRayHit
+        # and one lane's rest-frame form for the rest-frame queries
+        bodies = (stack_array(4, 16, np.float32), stack_array(1, 16, np.float64)[0],
+                  stack_array(1, 16, np.int64)[0], stack_array(1, 16, np.float64)[0],
+                  stack_array(7, 16, np.float32), stack_array(1, 16, np.int64)[0],
+                  stack_array(8, 16, np.float64), stack_array(3, 16, np.float64),
+                  stack_array(1, 16, np.float64)[0], stack_array(1, 16, np.float64)[0])
+        lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh = bodies
+        one = stack_array(1, 32, np.uint32)[0]
+        rest1 = stack_array(1, 7, np.float32)
+        frames_of = (eps_base, shift, beam, top)
         rgb = nlanes == 3
         scratch = (stack_array(1, 3, np.float64)[0], stack_array(1, 4, np.float64)[0],
                    stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.int64)[0],
@@ -706,6 +913,15 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                 thr[j, lane], li[j, lane], lf[j, lane], acc[j, lane] = 0.0, 0, 0.0, 0.0
                 rho[j, lane], nee[j, lane] = 0.0, 0.0
                 elam[j, lane], ebase[j, lane] = 0.0, 0.0
+                lam[j, lane] = 0.0
+            r_t[lane], r_seg[lane], pend[lane], seg[lane] = 0.0, -1, 1.0, -1
+            t_ev[lane], t_sh[lane] = 0.0, 0.0
+            for c in range(7):
+                rest[c, lane] = 0.0
+            for c in range(8):
+                frame[c, lane] = 0.0
+            for c in range(3):
+                p_lab[c, lane] = 0.0
         geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn, tri_rec)
         mats = (refl, emit, emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row,
                 l_scale, l_spot, l_cdf, sky_pmf, sky_row)
@@ -744,6 +960,13 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                         fresh[lane] = True
                         for j in range(4):
                             elam[j, lane] = lamu[i, j]
+                    if moving:  # from the camera's event, leaving no body
+                        for j in range(4):
+                            lam[j, lane] = lamu[i, j]
+                        for c in range(7):
+                            rest[c, lane] = 0.0
+                        r_t[lane], r_seg[lane], pend[lane] = t0, -1, 1.0
+                        first_seg[i] = -1
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
                     busy += 1
@@ -751,13 +974,17 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                 break
             if env_on:
                 env_refill(emit, env_row, rgb, nlanes, fresh, li, lf, spec)
-            fill_packet(ray, path, hit, hitf, valid)
             n_rays += busy
             if record:
                 for c in range(6):
                     for lane in range(W):
                         log_hit[packets, c, lane] = ray[c, lane]
-            intersect_packet(handle, valid, hit, native16)
+            if moving:  # each lane alone through the bodies' rest frames, then into them
+                trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one, rest1)
+                enter_bodies(seg_f, shift, beam, top, hitf, lanes, bodies)
+            else:
+                fill_packet(ray, path, hit, hitf, valid)
+                intersect_packet(handle, valid, hit, native16)
             # the hits' records on their way from memory while the numbers are drawn
             prefetch_hits(tri_rec, path, hit)
             bounce_numbers(key, depth, ua, ub)
@@ -776,7 +1003,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                 texel_rows(env_tex, etex, 0, 1, co)
                 texel_values(co, rgb, spec, evals, 0)
             sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, lights,
-                         env_on, env, etex, evals, ub)
+                         env_on, env, etex, evals, ub, moving, bodies, frames_of)
             for lane in range(W):
                 n_sh += svalid[lane] != 0
             if record:
@@ -787,7 +1014,10 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                     log_valid[packets, 0, lane] = valid[lane]
                     log_valid[packets, 1, lane] = svalid[lane]
             packets += 1
-            occluded_packet(handle, svalid, shadow, native16)
+            if moving:
+                block_bodies(tracer, svalid, shadow, shadowf, bodies, one)
+            else:
+                occluded_packet(handle, svalid, shadow, native16)
             add_unblocked(shadowf, svalid, nee, acc)
             # the paths that ended give their radiance and, from the camera ray, its distance
             for lane in range(W):
@@ -796,6 +1026,8 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool,
                     continue
                 if depth[lane] == 1 and hit[GEOM * W + lane] != _INVALID:
                     first_t[i] = hitf[TFAR * W + lane]
+                    if moving:
+                        first_seg[i] = seg[lane]
                 if not alive[lane]:
                     for j in range(4):
                         L[i, j] = acc[j, lane] if j < nlanes else 0.0
@@ -819,30 +1051,35 @@ def light_kind(sc: KernelScene) -> int:
     return ANY_LIGHTS
 
 
-def kind(sc: KernelScene) -> tuple[bool, int, bool, bool]:
+def kind(sc: KernelScene, accel: object = None) -> tuple[bool, int, bool, bool, bool]:
     """The scene's kind of lane kernel (:func:`_compile`): (vertex normals, its lights
-    (:func:`light_kind`), image textures, an environment map)."""
-    return bool(sc.has_vn), light_kind(sc), bool(sc.tex.enabled), bool(sc.env_on)
+    (:func:`light_kind`), image textures, an environment map, moving bodies: ``accel`` a
+    :class:`.rest_frames.MovingScene`)."""
+    return (bool(sc.has_vn), light_kind(sc), bool(sc.tex.enabled), bool(sc.env_on),
+            isinstance(accel, MovingScene))
 
 
 #: Embree's 16-ray packet queries for the lanes' rays (AVX-512), or one ray at a time
 #: (:func:`.embree.native_packets`): a constant of the machine, and of the compiled code
 PACKETS = native_packets()
-#: the compiled variants, by (smooth, lights, textured, map, packets) (:func:`kernel`)
-_KERNELS: dict[tuple[bool, int, bool, bool, bool], Any] = {}
+#: the compiled variants, by (smooth, lights, textured, map, packets, moving bodies)
+#: (:func:`kernel`)
+_KERNELS: dict[tuple[bool, int, bool, bool, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
 def kernel(smooth: bool, lights: int, textured: bool = False, env_on: bool = False,
-           native16: bool | None = None) -> Any:
+           moving: bool = False, native16: bool | None = None) -> Any:
     """The lane kernel for scenes with or without vertex normals, with emissive
     triangles, any lights or the map alone (:func:`light_kind`), with or without image
-    textures, with or without a colour environment map (:func:`_compile`); made once per
-    kind, also when several render threads ask for it at once. Its rays go to Embree as
-    16-ray packets where Embree runs them natively (:data:`PACKETS`; ``native16``
-    chooses), else one at a time."""
+    textures, with or without a colour environment map, with or without moving bodies
+    (:func:`_compile`); made once per kind, also when several render threads ask for it
+    at once. Its rays go to Embree as 16-ray packets where Embree runs them natively
+    (:data:`PACKETS`; ``native16`` chooses), else one at a time (moving bodies: one at a
+    time through their rest frames)."""
+    packets = PACKETS if native16 is None else bool(native16)
     key = (bool(smooth), int(lights), bool(textured), bool(env_on),
-           PACKETS if native16 is None else bool(native16))
+           packets and not moving, bool(moving))
     with _KERNELS_LOCK:
         if key not in _KERNELS:
             _KERNELS[key] = _compile(*key)
@@ -864,46 +1101,58 @@ def packet_log(n_paths: int, max_depth: int) -> tuple:
             np.zeros((n, 2, W), np.int32))
 
 
-def lane_trace(sc: KernelScene, accel: Accel, keys: np.ndarray, o: np.ndarray,
-               d: np.ndarray, lamu: np.ndarray, nlanes: int, max_depth: int, L: np.ndarray,
-               first_t: np.ndarray, sky_seen: bool = True, log: tuple | None = None,
-               spread: np.ndarray | float = 0.0,
-               native16: bool | None = None) -> tuple[int, int, int]:
-    """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates; key
-    ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``, 3: the rgb mode) to
-    its end through the scene ``sc`` (where :func:`applies`), sixteen at a time: its lab
-    radiance per lane into ``L[i]`` (float32 (N, 4); lanes ≥ nlanes 0) and the camera
-    ray's hit distance into ``first_t[i]`` (1e30: none). ``log`` (benchmarks,
-    :func:`packet_log`): every packet's rays. With textures, ``spread`` ((N,) or one for
-    all) is the camera rays' lab spread angle, the start of their ray cones
-    (:func:`.textures.lab_spread`). ``native16``: the rays as Embree's 16-ray packets or
-    one at a time (None: :data:`PACKETS`). Returns (nearest-hit rays, shadow rays,
-    packets)."""
-    run = kernel(*kind(sc), native16=native16)
-    return run(accel.handle, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
+def lane_trace(sc: KernelScene, accel: Accel | MovingScene, keys: np.ndarray,
+               o: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int, max_depth: int,
+               L: np.ndarray, first_t: np.ndarray, sky_seen: bool = True,
+               log: tuple | None = None, spread: np.ndarray | float = 0.0,
+               native16: bool | None = None, first_seg: np.ndarray | None = None,
+               t0: float = 0.0) -> tuple[int, int, int]:
+    """Trace path i (camera ray ``o[i]``, ``d[i]``: float32 accelerator coordinates, origin
+    lab time ``t0``; key ``keys[i]``; ``nlanes`` lanes at table coordinates ``lamu[i]``,
+    3: the rgb mode) to its end through the scene ``sc`` (where :func:`applies`;
+    ``accel`` its static BVH or its :class:`.rest_frames.MovingScene`), sixteen at a
+    time: its lab radiance per lane into ``L[i]`` (float32 (N, 4); lanes ≥ nlanes 0), the
+    camera ray's hit distance into ``first_t[i]`` (1e30: none) and, with moving bodies,
+    the segment it hit into ``first_seg[i]`` (-1: static; needed then). ``log``
+    (benchmarks, :func:`packet_log`): every packet's rays. With textures, ``spread``
+    ((N,) or one for all) is the camera rays' lab spread angle, the start of their ray
+    cones (:func:`.textures.lab_spread`). ``native16``: the rays as Embree's 16-ray
+    packets or one at a time (None: :data:`PACKETS`). Returns (nearest-hit rays, shadow
+    rays, packets)."""
+    moving = isinstance(accel, MovingScene)
+    if moving and first_seg is None:
+        raise ValueError("lane_trace: a scene with moving bodies needs first_seg")
+    tracer = accel.query_args() if moving else static_query_args(accel)
+    run = kernel(*kind(sc, accel), native16=native16)
+    return run(tracer, sc.v0, sc.e1, sc.e2, sc.ng, sc.area, sc.vn, sc.has_vn, sc.tri_mat,
                sc.mat_alpha, sc.refl, sc.emit, sc.mat_emit_row, sc.mat_one_sided, sc.l_kind,
                sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
                sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond,
                sc.env_mguide, sc.env_cguide, sc.env_pmf, float(sc.env_rot), int(sc.env_row),
-               float(sc.eps), sc.tex, sc.tri_rec, keys, o, d, lamu,
-               whole_paths.cone_spread(sc, spread, len(keys)), nlanes, max_depth, sky_seen, L,
-               first_t, NO_LOG if log is None else log)
+               float(sc.eps), sc.tex, sc.tri_rec, sc.seg_f, bool(sc.shift), bool(sc.beam),
+               keys, o, d, lamu, whole_paths.cone_spread(sc, spread, len(keys)), nlanes,
+               max_depth, sky_seen, float(t0), L, first_t,
+               whole_paths.NO_SEG if first_seg is None else first_seg,
+               NO_LOG if log is None else log)
 
 
-def trace(sc: KernelScene, accel: Accel, max_depth: int, keys: np.ndarray,
+def trace(sc: KernelScene, accel: Accel | MovingScene, max_depth: int, keys: np.ndarray,
           o_local: np.ndarray, d: np.ndarray, lamu: np.ndarray, nlanes: int,
           sky_seen: bool = True, buffers: dict | None = None,
-          spread: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          spread: np.ndarray | float = 0.0,
+          t0: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`.whole_paths.trace` for a scene where :func:`applies`: (L (N, 4) lab
     radiance, the camera rays' hit distances (1e30: none), the moving segments they hit
-    (all -1: the scene is static)), the arrays kept in ``buffers`` until its next use
+    (-1: the static scene)), the arrays kept in ``buffers`` until its next use
     (:func:`.integrator.wavefront_buffers`). ``o_local``/``d`` float32 (N, 3) camera rays
     in accelerator coordinates, ``lamu`` the lanes' table coordinates (N, 4); ``sky_seen``
     False hides the sky from the camera rays (a transparent film); ``spread`` the camera
-    rays' lab spread angles ((N,) or one for all; textures' level of detail)."""
+    rays' lab spread angles ((N,) or one for all; textures' level of detail); ``t0`` the
+    lab time of the camera rays' origin event (moving bodies)."""
     b = wavefront_buffers(len(keys), buffers, whole_paths.BUFFERS)
     b["seg"][:] = -1
     lane_trace(sc, accel, keys, np.ascontiguousarray(o_local, np.float32),
                np.ascontiguousarray(d, np.float32), np.ascontiguousarray(lamu, np.float32),
-               nlanes, max_depth, b["L"], b["first_t"], sky_seen, spread=spread)
+               nlanes, max_depth, b["L"], b["first_t"], sky_seen, spread=spread,
+               first_seg=b["seg"], t0=t0)
     return b["L"], b["first_t"], b["seg"]

@@ -59,8 +59,10 @@ class SegmentTable(NamedTuple):
     the direction of u (``H``..``H+2``), |u| (``B``), 1/γ, γ and γ²/(γ + 1) (``IG``,
     ``G``, ``C``: no division per ray), the frame origin event (``T_REF``, p_ref in
     accelerator coordinates ``Q``..``Q+2``), the emission window [``T_LO``, ``T_HI``),
-    the group's bounding sphere (centre = its BVH's origin ``CEN``..``CEN+2``, ``RAD``)
-    and its bounding box in BVH coordinates (``LO``..``LO+2``, ``HI``..``HI+2``). Three
+    the group's bounding sphere (centre = its BVH's origin ``CEN``..``CEN+2``, ``RAD``),
+    its bounding box in BVH coordinates (``LO``..``LO+2``, ``HI``..``HI+2``) and 1 − |u|
+    (``OMB``, exact: for the SIMD lanes' aberration, compiled with reassociation,
+    :func:`..physics.relativity.aberrate_doppler_lane`). Three
     arrays, so a compiled call that receives the table copies three array descriptors,
     not one per quantity."""
 
@@ -71,8 +73,8 @@ class SegmentTable(NamedTuple):
 
 # the columns of SegmentTable.f
 H, B, IG, G, C, T_REF, Q, T_LO, T_HI = 0, 3, 4, 5, 6, 7, 8, 11, 12
-CEN, RAD, LO, HI = 13, 16, 17, 20
-SEG_COLUMNS = 23
+CEN, RAD, LO, HI, OMB = 13, 16, 17, 20, 23
+SEG_COLUMNS = 24
 
 # fused multiply-adds only (no reassociation: the cancellation-free forms keep their
 # order); measured 15-30 % off the rest-frame rays
@@ -358,6 +360,7 @@ def _segments(groups: list[GroupAccel], lab_origin: np.ndarray) -> SegmentTable:
             f[i, H:H + 3] = s.u / b
         g = s.gamma
         f[i, B], f[i, IG], f[i, G], f[i, C] = b, 1.0 / g, g, g * g / (g + 1.0)
+        f[i, OMB] = 1.0 - b
         f[i, T_REF], f[i, Q:Q + 3] = s.t_ref, s.p_ref - lab_origin
         f[i, T_LO], f[i, T_HI] = s.t_lo, s.t_hi
         f[i, CEN:CEN + 3], f[i, RAD] = grp.accel.origin, grp.accel.bound_radius

@@ -662,7 +662,7 @@ BUFFERS = (("L", 4, np.float32), ("first_t", 0, np.float32), ("seg", 0, np.int32
 #: the ``spread`` of an untextured scene (its kernel never reads it)
 _NO_SPREAD = np.zeros(1, np.float32)
 #: the ``first_seg`` of a static scene (its kernel never writes it)
-_NO_SEG = np.zeros(1, np.int32)
+NO_SEG = np.zeros(1, np.int32)
 #: the compiled variants, by (map, textures, moving bodies, record) (:func:`kernel`)
 _KERNELS: dict[tuple[bool, bool, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
@@ -717,7 +717,7 @@ def lambert_paths(sc: KernelScene, accel: Accel | MovingScene, keys: np.ndarray,
         raise ValueError("lambert_paths: a scene with moving bodies needs first_seg")
     run = kernel(sc.env_on, sc.tex.enabled, moving, log is not None)
     return run(*scene_args(sc, accel), keys, o, d, lamu, spread, nlanes, max_depth, sky_seen,
-               float(t0), L, first_t, _NO_SEG if first_seg is None else first_seg,
+               float(t0), L, first_t, NO_SEG if first_seg is None else first_seg,
                NO_LOG if log is None else log)
 
 
