@@ -14,9 +14,10 @@ nothing but two-sided Lambert, the scene's lights (triangles, or the map), NEE +
 four hero lanes and roulette (that module's docstring). What it spends outside Embree is
 what a scalar kernel must spend on these paths. :mod:`relray.core.render.lane_paths`
 computes the same estimator sixteen paths at a time in SIMD lanes, a packet of sixteen
-rays per bounce (Embree's packet query on AVX-512, else one ray at a time); the
-renderer runs it on the static scenes (the Cornell box, the heavy scene,
-the environment-lit scene).
+rays per bounce (Embree's packet query on AVX-512, else one ray at a time; with moving
+bodies one ray at a time through their rest frames); the renderer runs it on all four
+(the Cornell box, the heavy scene, the environment-lit scene, the moving scene, whose
+light is at rest).
 
 Measured in one process, on the same camera rays, keys and hero lanes (relray's camera
 and spectral stages, run once, outside the timing), each the fastest of ``reps`` runs
@@ -35,7 +36,9 @@ alternated, thread CPU time per path:
   ``occluded_lanes``: ``rtcIntersect1``), *Embree16* by Embree's packet queries
   (``rtcIntersect16``/``rtcOccluded16``); *Embree (lanes)* is the one the lanes use on
   this machine (``lane_paths.PACKETS``: packets on AVX-512), and the lane kernel's work
-  outside Embree is *lanes* − *Embree (lanes)*.
+  outside Embree is *lanes* − *Embree (lanes)*; with moving bodies the lanes trace the
+  whole paths' rays one at a time through the rest frames (no packets), and *Embree1* is
+  the whole paths' replay.
 
 The whole-path kernel's work outside Embree is *whole paths* − *Embree*. The two
 integrators compute the same radiance with the same random numbers: the mean of each

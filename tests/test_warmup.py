@@ -44,36 +44,40 @@ def whole_path_kernel(job):
         return None
     args = tuple(numba.typeof(a) for a in whole_paths.scene_args(prep.kernel, prep.tracer))
     if lane_paths.applies(prep.kernel, prep.tracer, False):
-        return ("lanes", *lane_paths.kind(prep.kernel), args)
+        return ("lanes", *lane_paths.kind(prep.kernel, prep.tracer), args)
     return (prep.kernel.env_on, prep.kernel.tex.enabled, isinstance(prep.tracer, MovingScene),
             args)
 
 
 def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
     """The SIMD lanes compiled apart for flat or smooth shading, for emissive triangles,
-    other lights too or the map alone, for textures and for a colour map
-    (``lane_paths.kernel``), and
-    the whole-path kernel compiled apart for a scene without a light and for moving
-    bodies (``whole_paths.kernel``; a spectral map's, or a map's with moving bodies, is
-    compiled at its first render): the warm-up renders each kind, with the argument types the
+    other lights too or the map alone, for textures, for a colour map and for moving
+    bodies under lights at rest (``lane_paths.kernel``), and the whole-path kernel
+    compiled apart for a scene without a light and for moving bodies with a moving light
+    (``whole_paths.kernel``; a spectral map's, or a map's with moving bodies, is compiled
+    at its first render): the warm-up renders each kind, with the argument types the
     Cornell box (the lanes), a seed figure (a sky and smooth shading: the lanes' general
     kind), the stars (no light: the plain whole-path kernel), the default fly-by
-    (textured, smooth, under a sky: the lanes) and the train and Terrell presets (moving
-    bodies, moving lights) pass."""
+    (textured, smooth, under a sky: the lanes), the train preset (moving bodies under a
+    sky and a sun at rest: the moving lanes) and the Terrell preset (moving bodies that
+    glow: whole paths) pass."""
     warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
             for d in warmup.warmup_jobs(tmp_path)} - {None}
     assert {kind[:-1] for kind in warm} == {
-        ("lanes", False, TRI, False, False), ("lanes", False, ANY, False, False),
-        ("lanes", True, TRI, False, False), ("lanes", True, ANY, False, False),
-        ("lanes", True, ANY, True, False), ("lanes", False, ANY, False, True),
-        ("lanes", True, ANY, True, True), ("lanes", True, MAP, False, True),
-        ("lanes", True, MAP, True, True), (False, False, False), (False, False, True)}
+        ("lanes", False, TRI, False, False, False), ("lanes", False, ANY, False, False, False),
+        ("lanes", True, TRI, False, False, False), ("lanes", True, ANY, False, False, False),
+        ("lanes", True, ANY, True, False, False), ("lanes", False, ANY, False, True, False),
+        ("lanes", True, ANY, True, True, False), ("lanes", True, MAP, False, True, False),
+        ("lanes", True, MAP, True, True, False), ("lanes", False, ANY, False, False, True),
+        (False, False, False), (False, False, True)}
     for preset in ("cornell.toml", "seed_figures/fig1-1.toml", "stars/ahead.toml",
                    "flyby.toml", "moving/train.toml", "moving/terrell.toml"):
         assert whole_path_kernel(load_job(PRESETS / preset)) in warm, preset
-    assert whole_path_kernel(load_job(PRESETS / "cornell.toml"))[:5] == (
-        "lanes", False, TRI, False, False)
-    assert whole_path_kernel(load_job(PRESETS / "seed_figures/fig1-1.toml"))[:5] == (
-        "lanes", True, ANY, False, False)
-    assert whole_path_kernel(load_job(PRESETS / "flyby.toml"))[:5] == (
-        "lanes", True, ANY, True, False)
+    assert whole_path_kernel(load_job(PRESETS / "cornell.toml"))[:6] == (
+        "lanes", False, TRI, False, False, False)
+    assert whole_path_kernel(load_job(PRESETS / "seed_figures/fig1-1.toml"))[:6] == (
+        "lanes", True, ANY, False, False, False)
+    assert whole_path_kernel(load_job(PRESETS / "flyby.toml"))[:6] == (
+        "lanes", True, ANY, True, False, False)
+    assert whole_path_kernel(load_job(PRESETS / "moving/train.toml"))[:6] == (
+        "lanes", False, ANY, False, False, True)
