@@ -1853,9 +1853,9 @@ def _floor_text(bound: list[float], target: float) -> str:
     above = [b > target for b in bound]
     if not any(above):
         return (f"not a floor: the rest-frame traversal of each body alone bounds it at "
-                f"{_pair(bound)}, under the goal; the rest is the whole paths' work outside "
-                "the traversal (§6, the moving scene's floor; next step 2, SIMD lanes for "
-                "moving bodies)")
+                f"{_pair(bound)}, under the goal; the rest is the lanes' work outside the "
+                "traversal and the renderer's around the kernel (§6, the moving scene's "
+                "floor)")
     where = ("" if all(above) else " (above the goal at the "
              + ("high" if above[0] else "low") + " level only)")
     return ("**floor**: "
@@ -1918,11 +1918,17 @@ def moving_floor(d) -> str:
         f"{bound:.2f}× a static one, and its equal-error CPU time against "
         f"`llvm_ad_spectral` would be at least {bound:.2f} × the box's "
         f"({eq[0]:.2f} / {eq[1]:.2f}, §2) = **{bound * eq[0]:.2f} / {bound * eq[1]:.2f}**. "
-        "The goal of 1.0 is out of reach while each body is traced in a BVH of its own, "
-        "which it must be: a body's BVH is static only in its rest frame, and Embree's "
-        "instances apply affine maps to space, not a boost to events (rest_frames.py). "
-        f"Whole paths on this scene cost {m['whole_ns']:.0f} ns per path, "
-        f"{m['whole_ns'] - m['embree_ns']:.0f} of them outside the traversal.")
+        + ("The goal of 1.0 is out of reach while each body is traced in a BVH of its own, "
+           "which it must be: a body's BVH is static only in its rest frame, and Embree's "
+           "instances apply affine maps to space, not a boost to events (rest_frames.py). "
+           if bound * eq[0] > 1.0 else
+           "Under the goal: each body must be traced in a BVH of its own (its BVH is static "
+           "only in its rest frame, and Embree's instances apply affine maps to space, not a "
+           "boost to events, rest_frames.py), but that alone does not stop it. ")
+        + f"Whole paths on this scene cost {m['whole_ns']:.0f} ns per path, "
+        f"{m['whole_ns'] - m['embree_ns']:.0f} of them outside the traversal"
+        + (f"; the SIMD lanes, which the renderer runs here, {m['lanes_ns']:.0f} ns, "
+           f"{m['lanes_other_ns']:.0f} outside it." if _num(m.get("lanes_ns")) else "."))
 
 
 def _num(v: Any) -> bool:
@@ -2011,6 +2017,42 @@ def peer_ratios(d, scene: str) -> tuple[dict, str]:
                            ("scalar_spectral", "`scalar_spectral`"), ("cycles", "Cycles"))
         if (peer, 0) in ratio and (peer, 1) in ratio)
     return ratio, text
+
+
+def _moving_lanes_bullet(add, d) -> None:
+    """The 2026-11-28 round: moving bodies in the SIMD lanes (last round's next step 2)."""
+    m = {r["scene"]: r for r in d["path_floor"]}.get("moving", {})
+    run = ""
+    if _num(m.get("lanes_ns")) and _num(m.get("whole_ns")):
+        run = (f" In §6's run: the lanes {m['lanes_ns']:.0f} against whole paths' "
+               f"{m['whole_ns']:.0f} ns per path ({m['lanes_ns'] / m['whole_ns']:.2f}×), "
+               f"{m['lanes_other_ns']:.0f} against {m['whole_other_ns']:.0f} ns outside the "
+               f"traversal ({m['embree_ns']:.0f} ns, now "
+               f"{100 * m['lanes_embree_share']:.0f} % of a moving path in the lanes).")
+    add("- **Moving bodies in the SIMD lanes** (`render/lane_paths.py`, 2026-11-28 06:15–06:50, "
+        "AVX2; last round's next step 2): a scene of Lambert bodies that move under lights at "
+        "rest in the lab (emissive triangles, point, spot and sun lights, the constant sky; no "
+        "map, no textures: those, and glowing moving bodies, stay with whole paths) is traced "
+        "sixteen paths at a time. Each lane carries its ray's origin lab time, the segment it "
+        "leaves, its rest-frame form there and the pending D_out; its rays are traced one at a "
+        "time through the bodies' rest frames (`rest_frames.nearest_one`, `blocked_ray`, as "
+        "whole paths trace them); the frame changes are lane arithmetic with selects. What it "
+        "took: the aberration as a call left the lane loops scalar (the first version cost "
+        "1.04–1.09× the whole paths), and inlining the usual form under the lanes' "
+        "reassociation could turn (1 − b) − |c|²/2 into 1 − (b + |c|²/2), which loses "
+        "1 − cos θ' as b → 1: `relativity.aberrate_doppler_lane` takes 1 − b from the segment "
+        "table (`rest_frames.OMB`, exact), and `tests/test_relativity.py` checks it compiled "
+        "with the lanes' flags against the per-ray form up to b = 1 − 1e-12; the lanes' shift by "
+        "ln D is straight-line code (`rgb_table.doppler_columns`: the exponent by selects, "
+        "atanh's series; within 3 ulp of libm's `log`, `tests/test_rgb_table.py`). "
+        "`tests/test_lane_paths.py` checks the lanes path by path against whole paths and the "
+        "wavefront (two bodies, the room as one body whose rays land on the body they left, "
+        "without the Doppler shift or the searchlight factor, a static ball with the sky and "
+        "delta lights in a moving room; spectral, rgb and seed-gaussian; β 0–0.6). On the "
+        "peers' moving scene (`bench/path_floor.py --scene moving`, by hand at 06:36): 1747 "
+        "against 2176 ns per path (0.80×), 565 against 995 ns outside the traversal. The renderer "
+        "(`python -m relray.bench.ab d743b75 --scene peer_moving --pairs 8`, 128², 16 spp, 1 "
+        "thread): **0.86×** (quartiles 0.77–0.97; 2507 → 2068 ns)." + run)
 
 
 def _camera_block_bullet(add, d) -> None:
@@ -2451,6 +2493,7 @@ def _section_recommendations(add, d) -> None:
     shade = _ns(d, "shade kernel")
     pfc = {r["scene"]: r for r in d["path_floor"]}
     lane_rows = {n: r for n, r in pfc.items() if _num(r.get("lanes_ns"))}
+    _moving_lanes_bullet(add, d)
     _camera_block_bullet(add, d)
     _body_bounds_bullet(add, d)
     _lane_rays_bullet(add, d)
@@ -2731,40 +2774,20 @@ def _section_recommendations(add, d) -> None:
         "about 40 % of its CPU per path (1181 against the plain box's ~690 ns); the "
         "atlas descriptors, the mip level and the texels of sixteen lanes as vector code "
         "would be the next step.")
-    pfm, pfc2 = pfc.get("moving", {}), pfc.get("cornell", {})
-    parts = _moving_floor_parts(d)
-    if parts and _num(pfm.get("whole_other_ns")) and _num(pfc2.get("lanes_other_ns")) \
-            and _num(pfc2.get("whole_other_ns")) and _num(pfm.get("whole_ns")):
-        _, _, eq, around, least = parts
-        bound = [least * eq[0], least * eq[1]]
-        cut = pfm["whole_other_ns"] * pfc2["lanes_other_ns"] / pfc2["whole_other_ns"]
-        factor = (pfm["whole_ns"] - pfm["whole_other_ns"] + cut + around) \
-            / (pfm["whole_ns"] + around)
-        ratio, _ = peer_ratios(d, "moving")
-        eqm = {k: ratio[("llvm_ad_spectral", k)] for k in (0, 1)
-               if ("llvm_ad_spectral", k) in ratio}
-        now = (f", about {_pair([factor * eqm[0], factor * eqm[1]])} against "
-               f"`llvm_ad_spectral` (now {_pair([eqm[0], eqm[1]])})"
-               if 0 in eqm and 1 in eqm else "")
-        gain = (f"on the moving scene whole paths spend {pfm['whole_other_ns']:.0f} ns per "
-                "path outside the rest-frame traversal (§6), which alone bounds the scene's "
-                f"ratio to `llvm_ad_spectral` at {_pair(bound)} (§6, the moving scene's "
-                "floor). Cut as the lanes cut the static box's "
-                f"({pfc2['lanes_other_ns']:.0f} against {pfc2['whole_other_ns']:.0f} ns "
-                f"outside Embree), a moving path would cost about {factor:.2f}× what it "
-                f"does{now}. ")
-    else:
-        gain = "the whole paths' work outside the rest-frame traversal (§6). "
-    add("2. **SIMD lanes for moving bodies**: " + gain + "The design: lane rows for "
-        "each ray's lab time, the segment it leaves, the pending D_out and its rest-frame "
-        "form; each lane's nearest hit through `rest_frames.nearest_one` and its shadow "
-        "ray through `blocked_ray` (as `embree.intersect_lanes` traces a lane's ray "
-        "alone); the frame changes (aberration, D⁵, the lanes' column shift by ln D, "
-        "which needs a vector logarithm like `rgb_table.lambda_of_grid_column`'s "
-        "exponential) as lane arithmetic; next-event estimation from the hit's lab event "
-        "with the light's spectrum at D_l λ; first for static lights without a map or "
-        "textures (whole paths keep the rest), checked path by path against whole paths "
-        "as `tests/test_lane_paths.py` does for static scenes.")
+    pfm = pfc.get("moving", {})
+    ratio, _ = peer_ratios(d, "moving")
+    eqm = [ratio[("llvm_ad_spectral", k)] for k in (0, 1) if ("llvm_ad_spectral", k) in ratio]
+    now = ""
+    if _num(pfm.get("lanes_ns")) and len(eqm) == 2:
+        now = (f" In this run the moving scene's lanes cost {pfm['lanes_ns']:.0f} ns per "
+               f"path, {100 * pfm['lanes_embree_share']:.0f} % of it the rest-frame "
+               f"traversal (next step 4), and its ratio to `llvm_ad_spectral` is "
+               f"{_pair(eqm)} (§2).")
+    add("2. ~~**SIMD lanes for moving bodies**~~: done for lights at rest (2026-11-28, "
+        "above)." + now + " What is left: glowing moving bodies in the lanes (the "
+        "Terrell and ships presets: a moving light sampled in its rest frame from a static "
+        "vertex, a light of the vertex's own body in their common frame, the MIS weights "
+        "per rest-frame solid angle), and maps and textures with moving bodies.")
     add("3. ~~**The environment-lit scene's lanes**~~: done (2026-11-27 18:50, above: "
         "the map's λ as vector code, a kernel for the map as the only light, the "
         "searches only where a light sample is made; 0.79× its CPU per path). What is "
