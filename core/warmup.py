@@ -78,13 +78,13 @@ def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     """:data:`LAMBERT_JOB` under a constant sky, with a smooth-shaded sphere, with both,
     without its light, under an environment map, with both and an image texture (the
     default fly-by's kind), with that under the map instead, the smooth one and the
-    textured one lit by the map alone (an HDRI-lit scene), with its box moving under the
-    sky, and with its box and its lamp moving (a moving light): the SIMD lanes
-    (``render/lane_paths.py``: :data:`LAMBERT_JOB` itself, the first three, the textured
-    one, the four under the map and the moving box under the lamp at rest) and the
-    whole-path kernel (the one without a light, the moving lamp) are compiled apart for
-    each kind (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map and 2 × 2
-    texture are written into ``folder``."""
+    textured one lit by the map alone (an HDRI-lit scene), with its box moving, and with
+    its box moving under the sky: the SIMD lanes (``render/lane_paths.py``:
+    :data:`LAMBERT_JOB` itself, the first three, the textured one, the four under the map
+    and the moving box under the lamp alone) and the whole-path kernel (the one without a
+    light, the moving box under the sky, as the train and Terrell presets) are compiled
+    apart for each kind (``lane_paths.kernel``, ``whole_paths.kernel``). Their 8 × 4 map
+    and 2 × 2 texture are written into ``folder``."""
     sky = _write_image(folder / "sky.exr", np.full((4, 8, 3), 0.5))
     checker = _write_image(folder / "checker.exr", np.indices((2, 2, 3)).sum(axis=0) % 2)
     under_sky = {**LAMBERT_JOB, "scene": {"background": [0.1, 0.1, 0.1]}}
@@ -96,10 +96,9 @@ def lambert_variants(folder: Path) -> list[dict[str, Any]]:
     env = {**LAMBERT_JOB, "scene": {"environment": {"file": sky}}}
     tex = copy.deepcopy({**smooth, "scene": under_sky["scene"]})
     tex["materials"][0]["base_color_texture"] = checker
-    moving = copy.deepcopy(under_sky)
+    moving = copy.deepcopy(LAMBERT_JOB)
     moving["objects"][0]["velocity"] = [0.0, 0.0, 0.5]
-    moving_lamp = copy.deepcopy(moving)
-    moving_lamp["objects"][1]["velocity"] = [0.2, 0.0, 0.0]
+    moving_sky = {**moving, "scene": under_sky["scene"]}
     # the map as the only light, nothing else glowing (lane_paths.MAP_LIGHT): the lamp
     # and its material left out
     map_lit = [{**job, "scene": env["scene"],
@@ -107,7 +106,7 @@ def lambert_variants(folder: Path) -> list[dict[str, Any]]:
                 "objects": [o for o in job["objects"] if o["material"] != "lamp"]}
                for job in (smooth, tex)]
     return [under_sky, smooth, {**smooth, "scene": under_sky["scene"]}, dark, env, tex,
-            {**tex, "scene": env["scene"]}, *map_lit, moving, moving_lamp]
+            {**tex, "scene": env["scene"]}, *map_lit, moving, moving_sky]
 
 
 def warmup_jobs(folder: Path) -> list[dict[str, Any]]:

@@ -1,7 +1,7 @@
 """core/render/lane_paths.py: sixteen Lambert paths at a time in SIMD lanes, for static
 scenes (flat or smooth-shaded, with or without image textures: base colour, roughness,
 normal and emission; lit by emissive triangles, point, spot and sun lights, a constant
-sky or a colour environment map) and for scenes with moving bodies under lights at rest.
+sky or a colour environment map) and for scenes with moving bodies, glowing or not.
 
 Its estimator is whole_paths.py's (and the wavefront integrator's), with the same random
 numbers, so the three must give the same radiance path by path (to float32 rounding: a
@@ -106,13 +106,11 @@ def _map_scene(scene: str, spectral: str, folder, **render) -> dict:
     return data
 
 
-def _moving_everything(data):
+def _moving_smooth(data):
     """The room moves at 0.3 c (one body, the light at rest), a static smooth-shaded ball
-    stands in it, under a constant sky, with point, spot and sun lights: every kind of
-    vertex and light the moving lanes handle."""
+    stands in it."""
     _moving_room(data)
-    for change in (_vertex_normals, _sky, _delta_lights):
-        change(data)
+    _vertex_normals(data)
 
 
 def lane_scene(scene: str, spectral: str, beta: float, folder=None, **render) -> dict:
@@ -120,10 +118,10 @@ def lane_scene(scene: str, spectral: str, beta: float, folder=None, **render) ->
         data = scene_data(folder, scene, spectral, beta)
         data["render"].update(render)
         return data
-    if scene == "moving_everything":
+    if scene == "moving_smooth":
         data = cornell(spectral=spectral, spp=8, **render)
         data["motion"]["beta"] = [0.0, beta, 0.0]
-        _moving_everything(data)
+        _moving_smooth(data)
         return data
     if scene.startswith("environment"):
         data = _map_scene(scene, spectral, folder, **render)
@@ -211,20 +209,29 @@ def test_lanes_give_whole_paths_and_the_wavefronts_radiance_path_by_path(
     ("cornell+moving_room", "seed-gaussian", 0.0, {}),
     ("cornell+moving_room", "cie1931", 0.4, {"doppler": False}),
     ("cornell+moving_room", "cie1931", 0.4, {"searchlight": False}),
-    ("moving_everything", "cie1931", 0.5, {}), ("moving_everything", "rgb", 0.0, {})])
+    ("moving_smooth", "cie1931", 0.5, {}), ("moving_smooth", "rgb", 0.0, {}),
+    ("cornell+moving_light", "cie1931", 0.0, {}), ("cornell+moving_light", "cie1931", 0.5, {}),
+    ("cornell+moving_blocks_and_light", "cie1931", 0.4, {}),
+    ("cornell+moving_all", "cie1931", 0.0, {}), ("cornell+moving_all", "rgb", 0.3, {}),
+    ("cornell+moving_all", "cie1931", 0.3, {"searchlight": False})])
 def test_lanes_trace_moving_bodies_as_whole_paths_do_path_by_path(
         tmp_path, scene, spectral, beta, render):
-    """Moving bodies under lights at rest: each lane's rays traced alone through the
-    bodies' rest frames, the frame changes as lane arithmetic (the shift's logarithm as
-    straight-line code): the radiance, the camera rays' distances and segments and the
-    numbers of rays of whole paths and of the wavefront integrator, path by path. The
+    """Moving bodies: each lane's rays traced alone through the bodies' rest frames, the
+    frame changes as lane arithmetic (the shift's logarithm as straight-line code): the
+    radiance, the camera rays' distances and segments and the numbers of rays of whole
+    paths and of the wavefront integrator, path by path. Under lights at rest: the
     blocks as two bodies (most bounces leave one body for the static room), the room as
     one (most land on the body they left: its rest-frame form is reused), without the
-    Doppler shift or the searchlight factor, a static smooth ball, the sky and delta
-    lights in a moving room."""
+    Doppler shift or the searchlight factor, a static smooth ball in a moving room.
+    Glowing: the light moving alone (sampled in its rest frame
+    from the static vertices), with the blocks as other bodies (a moving vertex does not
+    sample it), the room and its light as one body (sampled in their common frame, the
+    MIS weights per rest-frame solid angle)."""
     fr, ev = renderer(lane_scene(scene, spectral, beta, tmp_path, **render), tmp_path)
     assert fr.whole_paths and fr.lane_paths
-    assert lane_paths.kind(fr.kernel, fr.prep.tracer)[4]
+    glowing = "light" in scene or "all" in scene
+    assert lane_paths.kind(fr.kernel, fr.prep.tracer)[4] == (
+        lane_paths.GLOWING_BODIES if glowing else lane_paths.BODIES)
     assert fr.kernel.shift == render.get("doppler", spectral != "rgb")
     keys, o, d, lamu, nlanes = camera_paths(fr, ev, 8)
     depth, t0, n = fr.settings.max_depth, float(ev.t), len(keys)
@@ -247,7 +254,8 @@ def test_lanes_trace_moving_bodies_as_whole_paths_do_path_by_path(
     n_rays, n_shadow, packets = rays1
     assert abs(n_rays - rays2[0]) <= 0.005 * n_rays
     assert abs(n_shadow - rays2[1]) <= 0.005 * n_shadow + 1
-    assert n_rays / 16 <= packets < n_rays / 16 + 64
+    # (the escaped rays' paths end before the packet is shaded: fewer packets than rays/16)
+    assert 0 < packets < n_rays / 16 + 64
 
 
 def distances_differing(a: np.ndarray, b: np.ndarray) -> float:
@@ -255,7 +263,7 @@ def distances_differing(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(np.abs(a - b) > 1e-5 * np.maximum(np.abs(a), np.abs(b))))
 
 
-@pytest.mark.parametrize("scene", ["everything", "moving_everything"])
+@pytest.mark.parametrize("scene", ["everything", "moving_smooth"])
 @pytest.mark.parametrize("n", [1, 5, 15, 17])
 def test_fewer_paths_than_lanes(tmp_path, n, scene):
     """A chunk of fewer paths than the 16 lanes (or one more): the lanes that never get a
@@ -340,17 +348,21 @@ def _no_light(data):
     data["objects"] = [o for o in data["objects"] if o["name"] != "ceiling_light"]
 
 
-@pytest.mark.parametrize("change", [_no_light, "spectral map", "cornell+moving_light",
-                                    "cornell+moving_all", "cornell+moving_textured",
-                                    "environment+moving"])
+@pytest.mark.parametrize("change", [_no_light, "spectral map", "cornell+moving_textured",
+                                    "environment+moving", "moving under a sky"])
 def test_scenes_that_need_more_take_scalar_whole_paths(tmp_path, change):
-    """No light to sample, a spectral map's bands; with moving bodies a moving light (of
-    another body or of the vertex's own), textures or a map: whole paths."""
+    """No light to sample, a spectral map's bands; with moving bodies textures, a map, or
+    a sky and delta lights (where the lanes did not pay): whole paths."""
     if change == "spectral map":  # its bands are interpolated at each λ: whole paths
         data = environment_scene(tmp_path)
         write_spectral_map(tmp_path / "bands.exr", [400.0, 550.0, 700.0],
                            np.full((4, 8, 3), 0.5))
         data["scene"]["environment"] = {"file": "bands.exr"}
+    elif change == "moving under a sky":
+        data = cornell()
+        _moving_room(data)
+        _sky(data)
+        _delta_lights(data)
     elif isinstance(change, str):
         data = scene_data(tmp_path, change, "cie1931", 0.0)
     else:
@@ -368,7 +380,7 @@ def test_denoising_features_leave_the_lanes(tmp_path):
 
 
 @pytest.mark.parametrize("scene", ["cornell", "textures", "environment",
-                                   "cornell+moving_blocks"])
+                                   "cornell+moving_blocks", "cornell+moving_all"])
 def test_the_renderer_takes_the_lanes_and_its_image_is_that_of_whole_paths(tmp_path, scene):
     # (with textures: the renderer gives the lanes its camera rays' spread, as to whole
     # paths, so the levels of detail agree)

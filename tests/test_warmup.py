@@ -11,6 +11,7 @@ import pytest
 from relray.core import warmup
 from relray.core.render.frames import prepare
 from relray.core.render.lane_paths import ANY_LIGHTS as ANY
+from relray.core.render.lane_paths import BODIES
 from relray.core.render.lane_paths import MAP_LIGHT as MAP
 from relray.core.render.lane_paths import TRIANGLE_LIGHTS as TRI
 from relray.core.render.rest_frames import MovingScene
@@ -53,14 +54,14 @@ def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
     """The SIMD lanes compiled apart for flat or smooth shading, for emissive triangles,
     other lights too or the map alone, for textures, for a colour map and for moving
     bodies under lights at rest (``lane_paths.kernel``), and the whole-path kernel
-    compiled apart for a scene without a light and for moving bodies with a moving light
+    compiled apart for a scene without a light and for moving bodies under a sky
     (``whole_paths.kernel``; a spectral map's, or a map's with moving bodies, is compiled
     at its first render): the warm-up renders each kind, with the argument types the
     Cornell box (the lanes), a seed figure (a sky and smooth shading: the lanes' general
     kind), the stars (no light: the plain whole-path kernel), the default fly-by
-    (textured, smooth, under a sky: the lanes), the train preset (moving bodies under a
-    sky and a sun at rest: the moving lanes) and the Terrell preset (moving bodies that
-    glow: whole paths) pass."""
+    (textured, smooth, under a sky: the lanes) and the train and Terrell presets (moving
+    bodies under a sky and a sun: whole paths) pass; moving bodies lit by a triangle take
+    the lanes."""
     warm = {whole_path_kernel(parse_job(d, tmp_path / "warmup.toml"))
             for d in warmup.warmup_jobs(tmp_path)} - {None}
     assert {kind[:-1] for kind in warm} == {
@@ -68,7 +69,7 @@ def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
         ("lanes", True, TRI, False, False, False), ("lanes", True, ANY, False, False, False),
         ("lanes", True, ANY, True, False, False), ("lanes", False, ANY, False, True, False),
         ("lanes", True, ANY, True, True, False), ("lanes", True, MAP, False, True, False),
-        ("lanes", True, MAP, True, True, False), ("lanes", False, ANY, False, False, True),
+        ("lanes", True, MAP, True, True, False), ("lanes", False, TRI, False, False, BODIES),
         (False, False, False), (False, False, True)}
     for preset in ("cornell.toml", "seed_figures/fig1-1.toml", "stars/ahead.toml",
                    "flyby.toml", "moving/train.toml", "moving/terrell.toml"):
@@ -79,5 +80,5 @@ def test_the_warm_up_compiles_every_kind_of_whole_path_kernel(tmp_path):
         "lanes", True, ANY, False, False, False)
     assert whole_path_kernel(load_job(PRESETS / "flyby.toml"))[:6] == (
         "lanes", True, ANY, True, False, False)
-    assert whole_path_kernel(load_job(PRESETS / "moving/train.toml"))[:6] == (
-        "lanes", False, ANY, False, False, True)
+    assert whole_path_kernel(load_job(PRESETS / "moving/train.toml"))[:3] == (
+        False, False, True)

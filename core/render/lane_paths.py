@@ -16,7 +16,8 @@ than its emulated packets), as one ``rtcIntersect16`` where it has (AVX-512:
 JIT-compiled kernels, written out by hand for the scenes where it pays
 (:func:`applies`): Lambert, flat or smooth-shaded, lit by emissive triangles, point,
 spot and sun lights, a constant sky or a colour environment map, with or without image
-textures; or with moving bodies under lights at rest (without a map or textures).
+textures; or with moving bodies, glowing or not, lit by emissive triangles alone
+(without a map or textures).
 Image textures (base colour, roughness, normal, emission) are a lane
 loop of their own (:func:`texture_lanes`: scalar calls per lane), so the other loops
 stay vector code. The environment map's lookups are vector code: the escaping rays' (u,
@@ -33,7 +34,13 @@ form there and the D_out whose shift waits for the next hit, as
 :func:`.whole_paths.lambert_paths` carries them for one path. The rays are traced one
 lane at a time through the static BVH and the bodies' rest frames
 (:func:`trace_bodies`, :func:`block_bodies`: :func:`.rest_frames.nearest_one` and
-``blocked_ray``, compiled apart with their own fast-math flags). The frame changes are
+``blocked_ray``, compiled apart with their own fast-math flags); a lane whose ray
+escapes ends its path and takes the next camera ray before the packet is shaded
+(:func:`finish_misses`), so the lane loops shade hits (without it, the moving lanes cost
+1.6× the whole paths on the train preset, 2.3× on the Terrell preset, where most rays
+escape). A light that moves with a body is sampled as whole paths sample it (its rest
+frame from a static vertex, the common frame from its own body, not at all from
+another body; the MIS weights per rest-frame solid angle). The frame changes are
 lane arithmetic, each lane's branch chosen by selects (:func:`enter_bodies`,
 :func:`sample_lanes`): the aberration in the cancellation-free form with 1 − |u| from
 the segment table (:func:`..physics.relativity.aberrate_doppler_lane`: the lanes compile
@@ -120,6 +127,7 @@ from .integrator import (
     face_forward,
     lab_offset,
     offset_point,
+    rest_point,
     shading_normal,
     vertex_normal,
     wavefront_buffers,
@@ -157,6 +165,8 @@ LINEAR_LIGHTS = 64
 """Longest light CDF that :func:`pick_lights` counts through instead of bisecting."""
 TRIANGLE_LIGHTS, ANY_LIGHTS, MAP_LIGHT = 0, 1, 2
 """The kinds of a scene's lights the lanes are compiled for (:func:`light_kind`)."""
+STATIC, BODIES, GLOWING_BODIES = 0, 1, 2
+"""The kinds of a scene's moving bodies the lanes are compiled for (:func:`bodies_kind`)."""
 
 
 def applies(sc: KernelScene, accel: object, features: bool) -> bool:
@@ -166,10 +176,17 @@ def applies(sc: KernelScene, accel: object, features: bool) -> bool:
     stay with whole paths), with a light to sample (emissive triangles, point, spot or
     sun lights, the constant sky, the map), and either static (its BVH an
     :class:`.accel.Accel`; image textures may be there) or with moving bodies (a
-    :class:`.rest_frames.MovingScene`) whose lights all rest in the lab, without a map
-    or image textures (those stay with whole paths)."""
+    :class:`.rest_frames.MovingScene`, glowing or not) lit by emissive triangles alone,
+    without a map or image textures (those stay with whole paths).
+
+    Moving bodies under a sky or delta lights stay with whole paths because the lanes
+    did not pay there (2026-11-28, AVX2, the lanes' CPU per path ÷ whole paths', on the
+    same paths): the train preset 1.15, the Terrell preset 1.04, a moving room with a
+    sky and delta lights 1.09 (each lane evaluates every kind of light's sample, and
+    most rays escape to the sky); lit by triangles alone the peers' moving scene 0.80–0.87,
+    a moving room 1.00, a moving room with its light 0.91."""
     moving = isinstance(accel, MovingScene)
-    if moving and (sc.env_on or sc.tex.enabled or bool(np.any(np.asarray(sc.l_seg) >= 0))):
+    if moving and (sc.env_on or sc.tex.enabled or light_kind(sc) != TRIANGLE_LIGHTS):
         return False
     return ((moving or isinstance(accel, Accel)) and whole_paths.applies(sc, accel, features)
             and (not sc.env_on or len(sc.env_nm) == 0) and len(sc.l_kind) > 0)
@@ -244,7 +261,7 @@ def bounce_numbers(key, depth, ua, ub):  # pragma: no cover - compiled
 
 @njit(**_LANES)
 def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce, smooth,
-               lights):  # pragma: no cover - compiled
+               lights, lights_move, bodies):  # pragma: no cover - compiled
     """The packet's hits, lane by lane: the point and the geometric normal turned towards
     the ray (``pt``, ``gn``), the emission of a front face (or a two-sided emitter) times
     the throughput into ``acc`` (MIS-weighted against NEE, w = p_bsdf² / (p_bsdf² +
@@ -253,8 +270,12 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
     (``lights`` :data:`MAP_LIGHT`: no material emits) the emission is not looked up
     (15 ns per path on the environment-lit scene).
     The hit's triangle comes from its packed record (``geo[8]``,
-    :func:`.integrator.triangle_records`). ``geo``, ``mats``, ``lanes``, ``bounce``:
-    :func:`lane_paths`' tuples."""
+    :func:`.integrator.triangle_records`). ``geo``, ``mats``, ``lanes``, ``bounce``,
+    ``bodies``: :func:`lane_paths`' tuples. Where lights move (``lights_move``), a moving
+    light met from a moving vertex weighs as :func:`.whole_paths.lambert_paths` weighs
+    it: from a vertex of the same body both pdfs per rest-frame solid angle (× k² =
+    D_out² and the distance × k, k the ray's rest-frame form's), from another body w = 1
+    (that light is not sampled there)."""
     vn, rec = geo[6], geo[8]
     refl, emit, emit_row, one_sided = mats[:4]
     sky_pmf, sky_row = mats[-2:]
@@ -286,6 +307,13 @@ def shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounc
         if dep > 0 and pm > 0.0:
             wt = power_heuristic(prev_pdf[lane], lightmod.triangle_light_pdf(
                 pm, a_tri, t, cos_g))
+        if lights_move:
+            r_seg, rest, seg = bodies[2], bodies[4], bodies[5]
+            kr = np.float64(rest[6, lane])
+            w_same = power_heuristic(prev_pdf[lane] * kr * kr, lightmod.triangle_light_pdf(
+                pm, a_tri, t * kr, cos_g))
+            both = dep > 0 and pm > 0.0 and seg[lane] >= 0 and r_seg[lane] >= 0
+            wt = (w_same if r_seg[lane] == seg[lane] else 1.0) if both else wt
         # a ray that escapes sees the sky (MIS against NEE towards it; not the camera ray
         # on a transparent film)
         sky = False
@@ -503,19 +531,27 @@ def trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one,
     event, in each body's rest frame, its own rest-frame form for the body it leaves),
     written into the packet's words as Embree would write them (tfar, u, v, primID,
     geomID 0, or ``RTC_INVALID_GEOMETRY_ID`` on a miss), the segment hit into the
-    bodies' ``seg`` row (-1: the static scene or none). ``one``: an ``RTCRayHit`` on the
-    kernel's stack; ``rest1``: one lane's rest-frame form."""
+    bodies' ``seg`` row (-1: the static scene or none): for the lanes whose ray is still
+    to be traced (``todo``; a lane without a path: a miss), the others keep theirs.
+    ``one``: an ``RTCRayHit`` on the kernel's stack; ``rest1``: one lane's rest-frame
+    form. Returns the rays traced."""
     handle, box_lo, box_hi, segs = tracer
     _, r_t, r_seg, _, rest, seg = bodies[:6]
+    todo = bodies[10]
     f = one.view(np.float32)
     addr = one.ctypes.data
+    traced = 0
     for lane in range(W):
+        if path[lane] >= 0 and not todo[lane]:
+            continue
         valid[lane] = -1 if path[lane] >= 0 else 0
         seg[lane] = -1
         hit[GEOM * W + lane] = _INVALID
         hitf[TFAR * W + lane] = MISS_DISTANCE
         if path[lane] < 0:
             continue
+        todo[lane] = False
+        traced += 1
         for c in range(7):
             rest1[0, c] = rest[c, lane]
         t, tri, b1, b2, sg = nearest_one(handle, box_lo, box_hi, segs, f, one, addr,
@@ -527,6 +563,44 @@ def trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one,
         if tri >= 0:
             hit[PRIM * W + lane], hit[GEOM * W + lane] = np.uint32(tri), np.uint32(0)
             seg[lane] = sg
+    return traced
+
+
+@njit(**_LANES)
+def finish_misses(emit, sky, shift, top, nlanes, sky_seen, hit, lanes, bodies,
+                  L):  # pragma: no cover - compiled
+    """The lanes whose ray escaped, finished before the packet is shaded (so that the
+    lane loops shade only hits while camera rays are left to take the lanes): the
+    pending shift into the lab (:func:`enter_bodies`' for a miss), the constant sky
+    (``sky`` = (p_sel, emission row), a row < 0: none) times the throughput, MIS-weighted
+    against next-event estimation except for the camera ray (not on a transparent film:
+    ``sky_seen``), as :func:`.whole_paths.sky_radiance` adds it; the path's radiance into
+    ``L``, its lane free. A scalar loop over the escaped lanes. Returns how many."""
+    path, _, depth, _, thr, li, lf, acc, prev_pdf = lanes
+    lam, pend = bodies[0], bodies[3]
+    sky_pmf, sky_row = sky
+    done = 0
+    for lane in range(W):
+        if path[lane] < 0 or hit[GEOM * W + lane] != _INVALID:
+            continue
+        cols = doppler_columns(pend[lane]) if shift else 0.0
+        pend[lane] = 1.0
+        dep = depth[lane]
+        wt = 1.0
+        if dep > 0 and sky_pmf > 0.0:
+            wt = power_heuristic(prev_pdf[lane], lightmod.sky_light_pdf(sky_pmf))
+        seen = sky_row >= 0 and (dep > 0 or sky_seen)
+        i = path[lane]
+        for j in range(4):
+            lam[j, lane] += cols
+            li[j, lane], lf[j, lane] = column(lam[j, lane], top)
+            if seen:
+                acc[j, lane] += thr[j, lane] * wt * lane_lerp(emit, sky_row, li[j, lane],
+                                                              lf[j, lane])
+            L[i, j] = acc[j, lane] if j < nlanes else 0.0
+        path[lane] = -1
+        done += 1
+    return done
 
 
 @njit(**_LANES)
@@ -627,7 +701,7 @@ def pick_lights(l_cdf, ua, pos):  # pragma: no cover - compiled
 
 @njit(**_LANES)
 def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, lights, env_on,
-                 env, etex, evals, ub, moving, bodies,
+                 env, etex, evals, ub, moving, lights_move, bodies,
                  frames_of):  # pragma: no cover - compiled
     """Each lane's next-event estimation towards its light (the shadow ray into the
     ``RTCRay16`` ``shadow``, valid where the sample counts; its contribution thr ρ/π
@@ -657,8 +731,8 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
     _, _, depth, ray, thr, li, lf, _, prev_pdf = lanes
     pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive = bounce
     env_tex, env_marg, env_cond, env_pmf, env_rot = env
-    lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh = bodies
-    eps_base, shift, beam, top = frames_of
+    lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh, _ = bodies
+    eps_base, shift, beam, top, seg_f, l_seg = frames_of
     h_e, w_e = env_tex.shape[0], env_tex.shape[1]
     lane4 = 1.0 if nlanes == 4 else 0.0
     for lane in range(eps.shape[0]):
@@ -670,20 +744,34 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
         gx, gy, gz = gn[0, lane], gn[1, lane], gn[2, lane]
         nx, ny, nz = nrm[0, lane], nrm[1, lane], nrm[2, lane]
         ep = eps[lane]
-        # the point the light is sampled from: on a moving body its lab point
+        # the point the light is sampled from: on a moving body its lab point (a light of
+        # the same body: its rest-frame point), at a static vertex a moving light's rest
+        # frame event of it
         sx_, sy_, sz_, s_ep = px, py, pz, ep
-        on_body = False
+        on_body = on_lab = away = False
         hx = hy = hz = b = ig = gam = cg = omb = plx = ply = plz = 0.0
+        ls = np.uint64(0)  # a moving light's segment
         if moving:
             on_body = seg[lane] >= 0
             hx, hy, hz = frame[0, lane], frame[1, lane], frame[2, lane]
             b, ig, gam, cg = frame[3, lane], frame[4, lane], frame[5, lane], frame[6, lane]
             omb = frame[7, lane]
             plx, ply, plz = p_lab[0, lane], p_lab[1, lane], p_lab[2, lane]
-            sx_ = plx if on_body else np.float64(px)
-            sy_ = ply if on_body else np.float64(py)
-            sz_ = plz if on_body else np.float64(pz)
-            s_ep = ray_offset_at(eps_base, plx, ply, plz) if on_body else ep
+            on_lab = on_body
+            rpx, rpy, rpz = np.float64(px), np.float64(py), np.float64(pz)
+            if lights_move:  # (a light of the vertex's own body: both in its rest frame)
+                light_seg = l_seg[k]
+                on_lab = on_body and light_seg != seg[lane]
+                away = light_seg >= 0 and not on_body
+                ls = np.uint64(max(light_seg, 0))
+                qx, qy, qz = rest_point(seg_f, ls, (px, py, pz), t_ev[lane])
+                rpx = qx if away else rpx
+                rpy = qy if away else rpy
+                rpz = qz if away else rpz
+            sx_ = plx if on_lab else rpx
+            sy_ = ply if on_lab else rpy
+            sz_ = plz if on_lab else rpz
+            s_ep = ray_offset_at(eps_base, plx, ply, plz) if on_lab else ep
         if lights == MAP_LIGHT:  # the map's own sample below is the only one
             (wx, wy, wz), p_l, scale, delta, finite, target, ok = (
                 (0.0, 0.0, 1.0), 0.0, 0.0, False, False, (0.0, 0.0, 0.0), False)
@@ -716,11 +804,25 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
         # the light's direction in the vertex's frame; D_l its spectrum's Doppler factor
         vx, vy, vz = wx, wy, wz
         d_l = 1.0
+        r_l = 0.0  # a moving light's lab distance from a static vertex
         if moving:  # on a body: seen in S_u, w_u and D_l = γ (1 + u·w)
             ux, uy, uz, inv_dl = aberrate_doppler_lane(wx, wy, wz, -hx, -hy, -hz, b, omb, ig)
-            d_l = 1.0 / inv_dl if on_body else 1.0
-            vx, vy, vz = (ux, uy, uz) if on_body else (wx, wy, wz)
-            p_l = p_l * d_l * d_l if on_body else p_l
+            d_l = 1.0 / inv_dl if on_lab else 1.0
+            vx, vy, vz = (ux, uy, uz) if on_lab else (wx, wy, wz)
+            if lights_move:
+                # another body's light is not sampled from a moving vertex; a moving light
+                # from a static vertex into the lab: the direction, D_e = ν_lab/ν_rest, the
+                # pdf p_r D_e², the distance r D_e
+                ok = ok and not (on_lab and l_seg[k] >= 0)
+                ax, ay, az, d_x = aberrate_doppler_lane(
+                    wx, wy, wz, seg_f[ls, rf.H], seg_f[ls, rf.H + 1], seg_f[ls, rf.H + 2],
+                    seg_f[ls, rf.B], seg_f[ls, rf.OMB], seg_f[ls, rf.IG])
+                ex_, ey_, ez_ = target[0] - sx_, target[1] - sy_, target[2] - sz_
+                r_l = math.sqrt(ex_ * ex_ + ey_ * ey_ + ez_ * ez_) * (1.0 / d_x)
+                d_l = 1.0 / d_x if away else d_l
+                wx, wy, wz = (ax, ay, az) if away else (wx, wy, wz)
+                vx, vy, vz = (ax, ay, az) if away else (vx, vy, vz)
+            p_l = p_l * d_l * d_l if on_lab or away else p_l
         cos_i = vx * nx + vy * ny + vz * nz
         go = (cont[lane] and ok and p_l > 0.0 and scale > 0.0 and cos_i > 0.0
               and vx * gx + vy * gy + vz * gz > 0.0)
@@ -731,22 +833,42 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
         # lab event
         o_off = offset_point((px, py, pz), (gx, gy, gz), ep, 1.0)
         ox, oy, oz = o_off
+        tx, ty, tz = target
+        fdx, fdy, fdz, f_len = 0.0, 0.0, 0.0, 0.0
         if moving:
-            if beam and on_body:  # the spectrum × D_l⁵
+            if beam and (on_lab or away):  # the spectrum × D_l⁵
                 c *= d_l * d_l * d_l * d_l * d_l
             (qx, qy, qz), dt_o = lab_offset((plx, ply, plz), (gx, gy, gz), ep, 1.0,
                                             (hx, hy, hz), b, gam, cg)
+            if lights_move:
+                # a light of the vertex's own body: the rest-frame segment to its target as
+                # the lab ray (integrator.body_shadow_ray); a moving light from a static
+                # vertex: towards its emission event, r_l away along the lab direction
+                bx_, by_, bz_ = tx - ox, ty - oy, tz - oz
+                bl = math.sqrt(bx_ * bx_ + by_ * by_ + bz_ * bz_)
+                fdx, fdy, fdz, d_sb = aberrate_doppler_lane(bx_ / bl, by_ / bl, bz_ / bl, hx,
+                                                            hy, hz, b, omb, ig)
+                f_len = bl * (1.0 - 1e-4) / d_sb
+                tx = np.float64(px) + wx * r_l if away else tx
+                ty = np.float64(py) + wy * r_l if away else ty
+                tz = np.float64(pz) + wz * r_l if away else tz
+                finite = finite or away
             ox = qx if on_body else np.float64(ox)
             oy = qy if on_body else np.float64(oy)
             oz = qz if on_body else np.float64(oz)
             t_sh[lane] = t_ev[lane] + dt_o if on_body else t_ev[lane]
-        sx, sy, sz = target[0] - ox, target[1] - oy, target[2] - oz
+        sx, sy, sz = tx - ox, ty - oy, tz - oz
         sl = math.sqrt(sx * sx + sy * sy + sz * sz)
+        sdx = sx / sl if finite else wx
+        sdy = sy / sl if finite else wy
+        sdz = sz / sl if finite else wz
+        s_len = sl * (1.0 - 1e-4) if finite else 1e30
+        if lights_move:
+            same = on_body and not on_lab
+            sdx, sdy, sdz = (fdx, fdy, fdz) if same else (sdx, sdy, sdz)
+            s_len = f_len if same else s_len
         set_packet_ray(shadowf, shadow, lane, np.float32(ox), np.float32(oy), np.float32(oz),
-                       np.float32(sx / sl if finite else wx),
-                       np.float32(sy / sl if finite else wy),
-                       np.float32(sz / sl if finite else wz),
-                       np.float32(sl * (1.0 - 1e-4) if finite else 1e30))
+                       np.float32(sdx), np.float32(sdy), np.float32(sdz), np.float32(s_len))
         svalid[lane] = -1 if go else 0
         lrow = l_row[np.uint64(k)]
         # the continuation: cosine-weighted about n, refused below g; off a body turned
@@ -815,7 +937,7 @@ def add_unblocked(shadowf, svalid, nee, acc):  # pragma: no cover - compiled
 
 
 def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: bool,
-             moving: bool) -> Any:
+             moving: bool, lights_move: bool) -> Any:
     """The lane kernel for one kind of scene (:func:`kernel`): ``smooth`` vertex normals,
     ``lights`` emissive triangles only (:data:`TRIANGLE_LIGHTS`), other lights too (point,
     spot, sun, the constant sky, the map: :data:`ANY_LIGHTS`) or the map alone
@@ -824,7 +946,8 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
     as Embree's 16-ray packets (else one at a time: :data:`PACKETS`), ``moving`` moving
     bodies (each lane's rays traced alone through their rest frames,
     :func:`trace_bodies`, :func:`block_bodies`; the frame changes :func:`enter_bodies`
-    and :func:`sample_lanes`'). The six are constants of the compiled code: numba and
+    and :func:`sample_lanes`'), ``lights_move`` some of them glow (a moving light). The
+    seven are constants of the compiled code: numba and
     LLVM drop the branches they close, so the Cornell box's lanes carry no normal
     interpolation, no light kinds it does not have, no texture lookups and no frame
     change (numba's on-disk cache keys each variant by its closure's values)."""
@@ -834,7 +957,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
                    emit_row, one_sided, l_kind, l_prim, l_pos, l_dir, l_row, l_scale, l_spot,
                    l_cdf, sky_pmf, sky_row, env_tex, env_marg, env_cond, env_mguide,
                    env_cguide, env_pmf, env_rot, env_row, eps_base, tex, tri_rec, seg_f,
-                   shift, beam, keys, o, d, lamu, spread, nlanes, max_depth, sky_seen, t0, L,
+                   l_seg, shift, beam, keys, o, d, lamu, spread, nlanes, max_depth, sky_seen, t0, L,
                    first_t, first_seg, log):  # pragma: no cover - compiled
         """:func:`lane_trace`'s kernel: the tracer (:meth:`.rest_frames.MovingScene.query_args`
         or :func:`.rest_frames.static_query_args`: the BVH's ``RTCScene`` handle first),
@@ -894,17 +1017,19 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
         # the D_out whose shift waits for the next hit, the ray's rest-frame form there
         # (origin, direction, D_out: rest_frames.nearest_ray); one bounce's segment hit,
         # the body's frame (h, b, 1/γ, γ, γ²/(γ + 1), 1 − b), the hit's lab point and time, the
-        # shadow ray's origin lab time; an RTCRayHit
+        # shadow ray's origin lab time, whether the lane's ray is still to be traced; an
+        # RTCRayHit
         # and one lane's rest-frame form for the rest-frame queries
         bodies = (stack_array(4, 16, np.float32), stack_array(1, 16, np.float64)[0],
                   stack_array(1, 16, np.int64)[0], stack_array(1, 16, np.float64)[0],
                   stack_array(7, 16, np.float32), stack_array(1, 16, np.int64)[0],
                   stack_array(8, 16, np.float64), stack_array(3, 16, np.float64),
-                  stack_array(1, 16, np.float64)[0], stack_array(1, 16, np.float64)[0])
-        lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh = bodies
+                  stack_array(1, 16, np.float64)[0], stack_array(1, 16, np.float64)[0],
+                  stack_array(1, 16, np.bool_)[0])
+        lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh, todo = bodies
         one = stack_array(1, 32, np.uint32)[0]
         rest1 = stack_array(1, 7, np.float32)
-        frames_of = (eps_base, shift, beam, top)
+        frames_of = (eps_base, shift, beam, top, seg_f, l_seg)
         rgb = nlanes == 3
         scratch = (stack_array(1, 3, np.float64)[0], stack_array(1, 4, np.float64)[0],
                    stack_array(1, 4, np.float64)[0], stack_array(1, 4, np.int64)[0],
@@ -931,7 +1056,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
                 elam[j, lane], ebase[j, lane] = 0.0, 0.0
                 lam[j, lane] = 0.0
             r_t[lane], r_seg[lane], pend[lane], seg[lane] = 0.0, -1, 1.0, -1
-            t_ev[lane], t_sh[lane] = 0.0, 0.0
+            t_ev[lane], t_sh[lane], todo[lane] = 0.0, 0.0, False
             for c in range(7):
                 rest[c, lane] = 0.0
             for c in range(8):
@@ -982,6 +1107,7 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
                         for c in range(7):
                             rest[c, lane] = 0.0
                         r_t[lane], r_seg[lane], pend[lane] = t0, -1, 1.0
+                        todo[lane] = True
                         first_seg[i] = -1
                     first_t[i] = MISS_DISTANCE
                 if path[lane] >= 0:
@@ -990,22 +1116,29 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
                 break
             if env_on:
                 env_refill(emit, env_row, rgb, nlanes, fresh, li, lf, spec)
-            n_rays += busy
-            if record:
+            if record:  # (with moving bodies: each packet's last round)
                 for c in range(6):
                     for lane in range(W):
                         log_hit[packets, c, lane] = ray[c, lane]
             if moving:  # each lane alone through the bodies' rest frames, then into them
-                trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one, rest1)
+                n_rays += trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one,
+                                       rest1)
+                # the escaped rays' paths end here while there are camera rays to take
+                # their lanes: the lane loops then shade hits only
+                if nxt < n_paths and finish_misses(emit, (sky_pmf, sky_row), shift, top,
+                                                   nlanes, sky_seen, hit, lanes, bodies,
+                                                   L) > 0:
+                    continue
                 enter_bodies(seg_f, shift, beam, top, hitf, lanes, bodies)
             else:
+                n_rays += busy
                 fill_packet(ray, path, hit, hitf, valid)
                 intersect_packet(handle, valid, hit, native16)
             # the hits' records on their way from memory while the numbers are drawn
             prefetch_hits(tri_rec, path, hit)
             bounce_numbers(key, depth, ua, ub)
             shade_hits(geo, mats, eps_base, max_depth, sky_seen, hit, hitf, lanes, bounce,
-                       smooth, lights)
+                       smooth, lights, lights_move, bodies)
             if env_on:
                 bilinear = env_misses(env, sky_pmf, sky_seen, hit, lanes, texels) > 0
                 env_texels(env_tex, rgb, spec, texels, co, evals, bilinear)
@@ -1019,7 +1152,8 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
                 texel_rows(env_tex, etex, 0, 1, co)
                 texel_values(co, rgb, spec, evals, 0)
             sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, lights,
-                         env_on, env, etex, evals, ub, moving, bodies, frames_of)
+                         env_on, env, etex, evals, ub, moving, lights_move, bodies,
+                         frames_of)
             for lane in range(W):
                 n_sh += svalid[lane] != 0
             if record:
@@ -1032,6 +1166,8 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
             packets += 1
             if moving:
                 block_bodies(tracer, svalid, shadow, shadowf, bodies, one)
+                for lane in range(W):
+                    todo[lane] = True
             else:
                 occluded_packet(handle, svalid, shadow, native16)
             add_unblocked(shadowf, svalid, nee, acc)
@@ -1067,35 +1203,46 @@ def light_kind(sc: KernelScene) -> int:
     return ANY_LIGHTS
 
 
-def kind(sc: KernelScene, accel: object = None) -> tuple[bool, int, bool, bool, bool]:
+def kind(sc: KernelScene, accel: object = None) -> tuple[bool, int, bool, bool, int]:
     """The scene's kind of lane kernel (:func:`_compile`): (vertex normals, its lights
-    (:func:`light_kind`), image textures, an environment map, moving bodies: ``accel`` a
-    :class:`.rest_frames.MovingScene`)."""
+    (:func:`light_kind`), image textures, an environment map, its bodies
+    (:func:`bodies_kind`))."""
     return (bool(sc.has_vn), light_kind(sc), bool(sc.tex.enabled), bool(sc.env_on),
-            isinstance(accel, MovingScene))
+            bodies_kind(sc, accel))
+
+
+def bodies_kind(sc: KernelScene, accel: object) -> int:
+    """The scene's moving bodies for the lanes: :data:`STATIC` (``accel`` a static BVH),
+    :data:`BODIES` (a :class:`.rest_frames.MovingScene` whose lights all rest in the
+    lab) or :data:`GLOWING_BODIES` (some light moves with a body)."""
+    if not isinstance(accel, MovingScene):
+        return STATIC
+    return GLOWING_BODIES if bool(np.any(np.asarray(sc.l_seg) >= 0)) else BODIES
 
 
 #: Embree's 16-ray packet queries for the lanes' rays (AVX-512), or one ray at a time
 #: (:func:`.embree.native_packets`): a constant of the machine, and of the compiled code
 PACKETS = native_packets()
-#: the compiled variants, by (smooth, lights, textured, map, packets, moving bodies)
-#: (:func:`kernel`)
-_KERNELS: dict[tuple[bool, int, bool, bool, bool, bool], Any] = {}
+#: the compiled variants, by (smooth, lights, textured, map, packets, moving bodies,
+#: moving lights) (:func:`kernel`)
+_KERNELS: dict[tuple[bool, int, bool, bool, bool, bool, bool], Any] = {}
 _KERNELS_LOCK = threading.Lock()
 
 
 def kernel(smooth: bool, lights: int, textured: bool = False, env_on: bool = False,
-           moving: bool = False, native16: bool | None = None) -> Any:
+           bodies: int = STATIC, native16: bool | None = None) -> Any:
     """The lane kernel for scenes with or without vertex normals, with emissive
     triangles, any lights or the map alone (:func:`light_kind`), with or without image
-    textures, with or without a colour environment map, with or without moving bodies
-    (:func:`_compile`); made once per kind, also when several render threads ask for it
-    at once. Its rays go to Embree as 16-ray packets where Embree runs them natively
-    (:data:`PACKETS`; ``native16`` chooses), else one at a time (moving bodies: one at a
-    time through their rest frames)."""
+    textures, with or without a colour environment map, static or with moving bodies
+    under lights at rest or glowing (:func:`bodies_kind`) (:func:`_compile`); made once
+    per kind, also when several render threads ask for it at once. Its rays go to Embree
+    as 16-ray packets where Embree runs them natively (:data:`PACKETS`; ``native16``
+    chooses), else one at a time (moving bodies: one at a time through their rest
+    frames)."""
     packets = PACKETS if native16 is None else bool(native16)
+    moving = bodies != STATIC
     key = (bool(smooth), int(lights), bool(textured), bool(env_on),
-           packets and not moving, bool(moving))
+           packets and not moving, moving, bodies == GLOWING_BODIES)
     with _KERNELS_LOCK:
         if key not in _KERNELS:
             _KERNELS[key] = _compile(*key)
@@ -1145,7 +1292,8 @@ def lane_trace(sc: KernelScene, accel: Accel | MovingScene, keys: np.ndarray,
                sc.l_prim, sc.l_pos, sc.l_dir, sc.l_row, sc.l_scale, sc.l_spot, sc.l_cdf,
                sc.sky_pmf, sc.sky_row, sc.env_tex, sc.env_marg, sc.env_cond,
                sc.env_mguide, sc.env_cguide, sc.env_pmf, float(sc.env_rot), int(sc.env_row),
-               float(sc.eps), sc.tex, sc.tri_rec, sc.seg_f, bool(sc.shift), bool(sc.beam),
+               float(sc.eps), sc.tex, sc.tri_rec, sc.seg_f, sc.l_seg, bool(sc.shift),
+               bool(sc.beam),
                keys, o, d, lamu, whole_paths.cone_spread(sc, spread, len(keys)), nlanes,
                max_depth, sky_seen, float(t0), L, first_t,
                whole_paths.NO_SEG if first_seg is None else first_seg,
