@@ -46,8 +46,9 @@ lane arithmetic, each lane's branch chosen by selects (:func:`enter_bodies`,
 the segment table (:func:`..physics.relativity.aberrate_doppler_lane`: the lanes compile
 with reassociation, and a call would leave the loops scalar), the lanes' shift by
 ln D as straight-line code (:func:`..physics.rgb_table.doppler_columns`: libm's ``log``
-is a call). On the peers' moving scene the lanes' work outside the traversal is 0.57×
-the whole paths' (2026-11-28, ``bench/path_floor.py --scene moving``).
+is a call). On the peers' moving scene the lanes' work outside the traversal is
+0.57–0.76× the whole paths', their CPU per path 0.80–0.89× (2026-11-28, AVX2,
+``bench/path_floor.py --scene moving``, by hand and in the bench's run).
 
 What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own stack
 (:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
