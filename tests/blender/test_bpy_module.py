@@ -67,7 +67,7 @@ def child_run(tmp_path_factory) -> dict[str, tuple[str, str]]:
     proc = subprocess.run(
         [sys.executable, "-m", "pytest", str(HERE), "-q", "-rA", "-p", "no:cacheprovider",
          f"--junitxml={junit}", "-o", "junit_family=xunit2", "-s"],
-        cwd=REPO, env=env, capture_output=True, text=True, timeout=1800)
+        cwd=REPO, env=env, capture_output=True, text=True, timeout=3600)
     log = work / "child.log"
     log.write_text(proc.stdout + proc.stderr, encoding="utf-8")
     print(proc.stdout[-6000:])

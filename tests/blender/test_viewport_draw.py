@@ -43,7 +43,7 @@ def run_probe(tmp_path: Path, mode: str) -> Path:
            "--python", str(HERE / "viewport_probe.py"),
            "--", str(out), mode]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=1200)
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=2400)
     (out / "log.txt").write_text(proc.stdout + proc.stderr)
     assert (out / "probe.json").is_file(), proc.stdout[-3000:] + proc.stderr[-3000:]
     probe = json.loads((out / "probe.json").read_text())
