@@ -269,9 +269,8 @@ def measure(bench: cm.RelrayBench, size: int = 128, spp: int = 16, reps: int = 5
             lane_paths.lane_trace(sc, prep.tracer, keys, o, d, lamu, 4, depth, L2, first_t,
                                   first_seg=first_seg, t0=t0)
             times["lanes"].append(time.thread_time() - start)
-            for by_ray, name in ((True, "embree1"), (False, "embree16")):
-                if bodies:  # (below: the whole paths' replay, no packets)
-                    continue
+            packet_replays = () if bodies else ((True, "embree1"), (False, "embree16"))
+            for by_ray, name in packet_replays:  # (bodies: the whole paths' replay, below)
                 start = time.thread_time()
                 replay_packets(prep.tracer.handle, *plog, packets, by_ray)
                 times[name].append(time.thread_time() - start)

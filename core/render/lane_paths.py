@@ -35,8 +35,9 @@ form there and the D_out whose shift waits for the next hit, as
 lane at a time through the static BVH and the bodies' rest frames
 (:func:`trace_bodies`, :func:`block_bodies`: :func:`.rest_frames.nearest_one` and
 ``blocked_ray``, compiled apart with their own fast-math flags); a lane whose ray
-escapes ends its path and takes the next camera ray before the packet is shaded
-(:func:`finish_misses`), so the lane loops shade hits (without it, the moving lanes cost
+escapes ends its path (the scene is lit by triangles: it sees nothing) and takes the
+next camera ray before the packet is shaded (:func:`finish_misses`), so the lane loops
+shade hits (without it, the moving lanes cost
 1.6× the whole paths on the train preset, 2.3× on the Terrell preset, where most rays
 escape). A light that moves with a body is sampled as whole paths sample it (its rest
 frame from a static vertex, the common frame from its own body, not at all from
@@ -538,7 +539,7 @@ def trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one,
     form. Returns the rays traced."""
     handle, box_lo, box_hi, segs = tracer
     _, r_t, r_seg, _, rest, seg = bodies[:6]
-    todo = bodies[10]
+    todo = bodies[9]
     f = one.view(np.float32)
     addr = one.ctypes.data
     traced = 0
@@ -568,36 +569,18 @@ def trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one,
 
 
 @njit(**_LANES)
-def finish_misses(emit, sky, shift, top, nlanes, sky_seen, hit, lanes, bodies,
-                  L):  # pragma: no cover - compiled
-    """The lanes whose ray escaped, finished before the packet is shaded (so that the
-    lane loops shade only hits while camera rays are left to take the lanes): the
-    pending shift into the lab (:func:`enter_bodies`' for a miss), the constant sky
-    (``sky`` = (p_sel, emission row), a row < 0: none) times the throughput, MIS-weighted
-    against next-event estimation except for the camera ray (not on a transparent film:
-    ``sky_seen``), as :func:`.whole_paths.sky_radiance` adds it; the path's radiance into
-    ``L``, its lane free. A scalar loop over the escaped lanes. Returns how many."""
-    path, _, depth, _, thr, li, lf, acc, prev_pdf = lanes
-    lam, pend = bodies[0], bodies[3]
-    sky_pmf, sky_row = sky
+def finish_misses(nlanes, hit, lanes, L):  # pragma: no cover - compiled
+    """The lanes whose ray escaped, in a scene lit by emissive triangles alone (no sky, no
+    map: an escaped ray sees nothing), finished before the packet is shaded, so that the
+    lane loops shade only hits while camera rays are left to take the lanes: the path's
+    radiance into ``L``, its lane free. Returns how many."""
+    path, acc = lanes[0], lanes[7]
     done = 0
     for lane in range(W):
         if path[lane] < 0 or hit[GEOM * W + lane] != _INVALID:
             continue
-        cols = doppler_columns(pend[lane]) if shift else 0.0
-        pend[lane] = 1.0
-        dep = depth[lane]
-        wt = 1.0
-        if dep > 0 and sky_pmf > 0.0:
-            wt = power_heuristic(prev_pdf[lane], lightmod.sky_light_pdf(sky_pmf))
-        seen = sky_row >= 0 and (dep > 0 or sky_seen)
         i = path[lane]
         for j in range(4):
-            lam[j, lane] += cols
-            li[j, lane], lf[j, lane] = column(lam[j, lane], top)
-            if seen:
-                acc[j, lane] += thr[j, lane] * wt * lane_lerp(emit, sky_row, li[j, lane],
-                                                              lf[j, lane])
             L[i, j] = acc[j, lane] if j < nlanes else 0.0
         path[lane] = -1
         done += 1
@@ -614,21 +597,18 @@ def enter_bodies(seg_f, shift, beam, top, hitf, lanes, bodies):  # pragma: no co
     logarithm, :func:`..physics.rgb_table.doppler_columns`); back on the body the ray
     left, its rest-frame form's direction and D_u = 1/D_out, no shift (the pending one
     cancels); anywhere else (a static hit, a miss) the pending shift alone. The lanes'
-    columns follow their shifted table coordinates; the lab point of the hit, its lab
-    time and the body's frame (h, b, 1/γ, γ, γ²/(γ + 1), 1 − b) are kept for the bounce.
+    columns follow their shifted table coordinates; the lab point of the hit and its lab
+    time are kept for the bounce.
     Straight-line code over the lanes: both branches computed, the lane's chosen by
     selects."""
     _, _, _, ray, thr, li, lf, _, _ = lanes
-    lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev = bodies[:9]
+    lam, r_t, r_seg, pend, rest, seg, p_lab, t_ev = bodies[:8]
     for lane in range(W):
         sg = seg[lane]
         moving = sg >= 0
         s = np.uint64(max(sg, 0))
         hx, hy, hz = seg_f[s, rf.H], seg_f[s, rf.H + 1], seg_f[s, rf.H + 2]
         b, ig, omb = seg_f[s, rf.B], seg_f[s, rf.IG], seg_f[s, rf.OMB]
-        frame[0, lane], frame[1, lane], frame[2, lane] = hx, hy, hz
-        frame[3, lane], frame[4, lane] = b, ig
-        frame[5, lane], frame[6, lane], frame[7, lane] = seg_f[s, rf.G], seg_f[s, rf.C], omb
         t = hitf[TFAR * W + lane]
         ox, oy, oz = ray[0, lane], ray[1, lane], ray[2, lane]
         dx, dy, dz = ray[3, lane], ray[4, lane], ray[5, lane]
@@ -659,7 +639,7 @@ def block_bodies(tracer, svalid, shadow, shadowf, bodies, one):  # pragma: no co
     lane's origin event ``t_sh``): a blocked lane's tfar becomes -inf, as with
     ``rtcOccluded16``."""
     handle, box_lo, box_hi, segs = tracer
-    t_sh = bodies[9]
+    t_sh = bodies[8]
     f = one.view(np.float32)
     addr = one.ctypes.data
     for lane in range(W):
@@ -732,7 +712,7 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
     _, _, depth, ray, thr, li, lf, _, prev_pdf = lanes
     pt, gn, nrm, eps, rho, ua, pos, nee, cont, alive = bounce
     env_tex, env_marg, env_cond, env_pmf, env_rot = env
-    lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh, _ = bodies
+    lam, r_t, r_seg, pend, rest, seg, p_lab, t_ev, t_sh, _ = bodies
     eps_base, shift, beam, top, seg_f, l_seg = frames_of
     h_e, w_e = env_tex.shape[0], env_tex.shape[1]
     lane4 = 1.0 if nlanes == 4 else 0.0
@@ -754,9 +734,10 @@ def sample_lanes(geo, mats, nlanes, shadow, shadowf, svalid, lanes, bounce, ligh
         ls = np.uint64(0)  # a moving light's segment
         if moving:
             on_body = seg[lane] >= 0
-            hx, hy, hz = frame[0, lane], frame[1, lane], frame[2, lane]
-            b, ig, gam, cg = frame[3, lane], frame[4, lane], frame[5, lane], frame[6, lane]
-            omb = frame[7, lane]
+            s = np.uint64(max(seg[lane], 0))
+            hx, hy, hz = seg_f[s, rf.H], seg_f[s, rf.H + 1], seg_f[s, rf.H + 2]
+            b, ig, gam, cg = seg_f[s, rf.B], seg_f[s, rf.IG], seg_f[s, rf.G], seg_f[s, rf.C]
+            omb = seg_f[s, rf.OMB]
             plx, ply, plz = p_lab[0, lane], p_lab[1, lane], p_lab[2, lane]
             on_lab = on_body
             rpx, rpy, rpz = np.float64(px), np.float64(py), np.float64(pz)
@@ -1017,17 +998,16 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
         # frame), its ray's origin lab time, the segment whose body it leaves (-1: none),
         # the D_out whose shift waits for the next hit, the ray's rest-frame form there
         # (origin, direction, D_out: rest_frames.nearest_ray); one bounce's segment hit,
-        # the body's frame (h, b, 1/γ, γ, γ²/(γ + 1), 1 − b), the hit's lab point and time, the
-        # shadow ray's origin lab time, whether the lane's ray is still to be traced; an
-        # RTCRayHit
-        # and one lane's rest-frame form for the rest-frame queries
+        # the hit's lab point and time, the shadow ray's origin lab time, whether the
+        # lane's ray is still to be traced; an RTCRayHit and one lane's rest-frame form
+        # for the rest-frame queries
         bodies = (stack_array(4, 16, np.float32), stack_array(1, 16, np.float64)[0],
                   stack_array(1, 16, np.int64)[0], stack_array(1, 16, np.float64)[0],
                   stack_array(7, 16, np.float32), stack_array(1, 16, np.int64)[0],
-                  stack_array(8, 16, np.float64), stack_array(3, 16, np.float64),
+                  stack_array(3, 16, np.float64),
                   stack_array(1, 16, np.float64)[0], stack_array(1, 16, np.float64)[0],
                   stack_array(1, 16, np.bool_)[0])
-        lam, r_t, r_seg, pend, rest, seg, frame, p_lab, t_ev, t_sh, todo = bodies
+        lam, r_t, r_seg, pend, rest, seg, p_lab, t_ev, t_sh, todo = bodies
         one = stack_array(1, 32, np.uint32)[0]
         rest1 = stack_array(1, 7, np.float32)
         frames_of = (eps_base, shift, beam, top, seg_f, l_seg)
@@ -1060,8 +1040,6 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
             t_ev[lane], t_sh[lane], todo[lane] = 0.0, 0.0, False
             for c in range(7):
                 rest[c, lane] = 0.0
-            for c in range(8):
-                frame[c, lane] = 0.0
             for c in range(3):
                 p_lab[c, lane] = 0.0
         geo = (v0, e1, e2, ng, area, tri_mat, vn, has_vn, tri_rec)
@@ -1124,11 +1102,10 @@ def _compile(smooth: bool, lights: int, textured: bool, env_on: bool, native16: 
             if moving:  # each lane alone through the bodies' rest frames, then into them
                 n_rays += trace_bodies(tracer, path, ray, valid, bodies, hit, hitf, one,
                                        rest1)
-                # the escaped rays' paths end here while there are camera rays to take
-                # their lanes: the lane loops then shade hits only
-                if nxt < n_paths and finish_misses(emit, (sky_pmf, sky_row), shift, top,
-                                                   nlanes, sky_seen, hit, lanes, bodies,
-                                                   L) > 0:
+                # lit by triangles alone, the escaped rays' paths end here while there are
+                # camera rays to take their lanes: the lane loops then shade hits only
+                if lights == TRIANGLE_LIGHTS and nxt < n_paths and finish_misses(
+                        nlanes, hit, lanes, L) > 0:
                     continue
                 enter_bodies(seg_f, shift, beam, top, hitf, lanes, bodies)
             else:
