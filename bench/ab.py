@@ -8,10 +8,11 @@ git revision) is unpacked with ``git archive`` into a temporary folder (its kern
 their own numba cache entries, keyed by file path: its first run compiles them), then
 each round runs one process of each tree, the order alternating from round to round.
 A process builds and renders the scene (:func:`.profile_scenes.scene_bench`: cornell,
-heavy, environment, textured, moving (the room as one body); or ``peer_moving``, the
-peers' moving scene of four bodies, :func:`.path_floor.floor_bench`; ``size``², ``spp``,
-1 thread) ``reps`` times after one untimed render and prints its fastest process CPU
-time per path (of the render call: :class:`.common.RelrayBench`). The result is the
+heavy, environment, textured, moving (the room as one body); ``peer_moving``, the
+peers' moving scene of four bodies, :func:`.path_floor.floor_bench`; or any job file,
+``--scene presets/moving/train.toml``: its frame 1; ``size``², ``spp``, 1 thread)
+``reps`` times after one untimed render and prints its fastest process CPU time per path
+(of the render call: :class:`.common.RelrayBench`). The result is the
 median over the rounds of (this ÷ revision) with its quartiles: a paired ratio, so a
 drift of the machine's load cancels within a round.
 """
@@ -36,7 +37,11 @@ from pathlib import Path
 from relray.bench import profile_scenes
 scene, spp, size, reps, tmp = sys.argv[1], *map(int, sys.argv[2:5]), Path(sys.argv[5])
 heavy = 1_000_000 if scene == "heavy" else 2000
-if scene == "peer_moving":
+if scene.endswith(".toml"):
+    from relray.bench.common import RelrayBench
+    from relray.core.scene.job import load_job
+    bench = RelrayBench(load_job(Path(scene)))
+elif scene == "peer_moving":
     from relray.bench import path_floor
     bench = path_floor.floor_bench("moving", tmp, heavy)
 elif hasattr(profile_scenes, "scene_bench"):
@@ -87,6 +92,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--pairs", type=int, default=8)
     ap.add_argument("--reps", type=int, default=4)
     a = ap.parse_args(argv)
+    if a.scene.endswith(".toml"):
+        a.scene = str(Path(a.scene).resolve())
     here = Path(__file__).resolve().parents[1]
     with tempfile.TemporaryDirectory() as tmp:
         there = unpack(a.rev, here, Path(tmp) / "rev")
