@@ -44,7 +44,7 @@ demo: $(STAMP)
 ## run under the bpy module in one child process, see tests/blender/test_bpy_module.py)
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=25
 
 ## make test-blender: the same tests/blender files under a real `blender -b` (Debian
 ## trixie's Blender 4.3 with Python 3.13, in a debootstrap chroot cached in

@@ -48,10 +48,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from numpy.typing import ArrayLike
 
 from ..errors import UserError
+from ..jit import njit
 
 __all__ = [
     "ShutterEvent",
@@ -603,7 +603,7 @@ def check_beta(beta: object, key: str = "motion.beta") -> np.ndarray:
 
 
 # ----------------------------------------------------------------- per-ray kernel form
-@njit(nogil=True, error_model="numpy", inline="always")
+@njit(nogil=True, error_model="numpy", forceinline=True)
 def aberrate_doppler_lane(dx, dy, dz, hx, hy, hz, b, omb, inv_g):
     """:func:`aberrate_doppler_ray` for a caller compiled with reassociation (the SIMD
     lanes, ``render/lane_paths.py``, whose ``fastmath`` allows it; inlined there, so a

@@ -44,9 +44,9 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from .. import user_cache_dir
+from ..jit import njit
 from ..resources import usable_cores
 from . import sigmoid as _sig
 from .spectrum import INV_DLOG, LOG_GRID_MIN, SIGMOID_BAND_NM, reflectance_fit_model
@@ -184,7 +184,7 @@ def _store(path: Path, table: CoefficientTable) -> None:
             "on every run", path, e.strerror or e)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def _interval(scale, z):
     """k with scale[k] ≤ z < scale[k+1] (0 ≤ k ≤ len-2; z clamped), by bisection."""
     lo, hi = 0, scale.shape[0] - 1
@@ -197,7 +197,7 @@ def _interval(scale, z):
     return lo
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def table_cell(scale, data, r, g, b):
     """Where the linear Rec.709 reflectance (r, g, b) (each clamped to [0, 1]) falls in
     the table: (grey c2 or NaN, largest channel, z, y, x node indices, fz, fy, fx
@@ -224,7 +224,7 @@ def table_cell(scale, data, r, g, b):
     return math.nan, big, zi, yi, xi, fz, y - yi, x - xi
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def table_coefficients(scale, data, r, g, b):
     """(c0, c1, c2) of (r, g, b) interpolated trilinearly in the table (exact for greys).
 
@@ -248,7 +248,7 @@ def table_coefficients(scale, data, r, g, b):
     return out0, out1, out2
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy", fastmath=False)
 def cell_reflectance(data, cell, lam_nm):
     """ρ(λ) of a :func:`table_cell` result: the trilinear blend of its 8 nodes' spectra,
 
@@ -256,7 +256,9 @@ def cell_reflectance(data, cell, lam_nm):
 
     whose colour is exactly the blend of the nodes' colours, and so exactly (r, g, b):
     the node colours (z, x z, y z) are multilinear in the cell's coordinates, which
-    trilinear weights reproduce. Rest frame of the surface."""
+    trilinear weights reproduce. Rest frame of the surface. Exact IEEE arithmetic (no
+    fast-math, in every kernel too), so that :func:`.textures.cell_reflectance4` gives
+    the same values."""
     c2g, big, zi, yi, xi, fz, fy, fx = cell
     if not math.isnan(c2g):
         return sigmoid_reflectance(0.0, 0.0, c2g, lam_nm)
@@ -273,13 +275,13 @@ def cell_reflectance(data, cell, lam_nm):
     return out
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def table_reflectance(scale, data, r, g, b, lam_nm):
     """ρ(λ) of the reflectance (r, g, b) (:func:`table_cell`, :func:`cell_reflectance`)."""
     return cell_reflectance(data, table_cell(scale, data, r, g, b), lam_nm)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy", fastmath=False)
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy", fastmath=False)
 def sigmoid_reflectance(c0, c1, c2, lam_nm):
     """s(λ) = ½ + ½ x/√(1+x²), x = (c0 t + c1) t + c2, t = (clip(λ, 380, 720) - 380)/340
     (rest frame of the surface; module docstring)."""
@@ -288,14 +290,14 @@ def sigmoid_reflectance(c0, c1, c2, lam_nm):
     return 0.5 + 0.5 * x / math.sqrt(1.0 + x * x)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy", fastmath=False)
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy", fastmath=False)
 def band_coordinate(lam_nm):
     """t = (clip(λ, 380, 720) - 380)/340: where the wavelength λ (nm) falls in the
     sigmoid's band (:func:`sigmoid_reflectance`)."""
     return (min(max(lam_nm, _BAND_LO), _BAND_HI) - _BAND_LO) * _INV_BAND
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def lambda_of_column(u):
     """λ in nm of the fractional column u of :mod:`.spectrum`'s log-spaced lab grid
     (the kernels' ``lamu``): exp(ln λ_min + u / INV_DLOG)."""
@@ -310,7 +312,8 @@ _INV_LN2 = 1.0 / math.log(2.0)
 _EXP_TAYLOR = tuple(1.0 / math.factorial(k) for k in range(14))
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy",
+      fastmath={"contract"})
 def lambda_of_grid_column(u):
     """:func:`lambda_of_column` as straight-line code, for u on the grid (0 ≤ u ≤
     GRID_N − 1, λ from 1 nm to 100 µm): x = ln λ_min + u / INV_DLOG ∈ [0, ln 10⁵],
@@ -319,7 +322,8 @@ def lambda_of_grid_column(u):
     selects over n's five bits (exact), so λ = 2ⁿ e^r within 4e-16 of libm's ``exp``
     (``tests/test_rgb_table.py``). libm's ``exp`` is a call that leaves a loop over the
     SIMD lanes scalar; this one vectorises (the lanes' refill, :mod:`..render.lane_paths`).
-    """
+    Contractions only (no reassociation, which would merge ln 2's two parts), in the
+    lanes too."""
     x = LOG_GRID_MIN + u * _DLOG
     n = np.int64(x * _INV_LN2 + 0.5)
     fn = np.float64(n)
@@ -338,7 +342,7 @@ _ATANH_SERIES = tuple(1.0 / (2 * k + 1) for k in range(11))
 _SQRT2 = math.sqrt(2.0)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def _exponent_step(m, e, k):
     """m · 2⁻ᵏ, e + k where m ≥ 2ᵏ; m · 2ᵏ, e − k where m < 2⁻ᵏ; else m, e (selects)."""
     big, small = 2.0 ** k, 2.0 ** -k
@@ -349,7 +353,8 @@ def _exponent_step(m, e, k):
     return (m * big if down else m), (e - k if down else e)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy",
+      fastmath={"contract"})
 def doppler_columns(D):
     """The columns of :mod:`.spectrum`'s log-spaced lab grid by which a Doppler factor D
     shifts a lane, ln(D) · INV_DLOG (the kernels' frame changes,
@@ -360,7 +365,8 @@ def doppler_columns(D):
     ``log`` (``tests/test_rgb_table.py``). D must lie in [2⁻⁶³, 2⁶³]: a Doppler factor
     of |β| < 1 in float64 lies within [1e-8, 1e8], the product of two within 2^±54.
     libm's ``log`` is a call that leaves a loop over the SIMD lanes scalar; this one
-    vectorises (the moving bodies' lanes, :mod:`..render.lane_paths`)."""
+    vectorises (the moving bodies' lanes, :mod:`..render.lane_paths`). Contractions only
+    (no reassociation, which would merge ln 2's two parts), in the lanes too."""
     m, e = _exponent_step(np.float64(D), 0.0, 32.0)
     m, e = _exponent_step(m, e, 16.0)
     m, e = _exponent_step(m, e, 8.0)

@@ -19,8 +19,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from ..jit import njit
 from .embree import TriangleScene, intersect_rays, occluded_rays
 
 MISS_DISTANCE = np.float32(1e30)

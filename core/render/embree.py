@@ -32,8 +32,9 @@ import weakref
 
 import numpy as np
 from llvmlite import binding as llvm
-from numba import njit, types
+from numba import types
 
+from ..jit import njit
 from .stack import stack_array
 
 _U64 = ctypes.c_uint64
@@ -164,7 +165,7 @@ PACKET_WORDS = 24
 TFAR, PRIM, GEOM, HIT_U, HIT_V = _TFAR, _PRIM, _GEOM, _HIT_U, _HIT_V
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def set_packet_ray(f, u, lane, ox, oy, oz, dx, dy, dz, tfar):  # pragma: no cover - compiled
     """Lane ``lane`` of an ``RTCRayHit16`` (or ``RTCRay16``; ``f``/``u`` its float32 and
     uint32 views): origin, tnear 0, direction, time 0, tfar, every mask bit, id and
@@ -190,7 +191,7 @@ def packet_buffers():  # pragma: no cover - compiled
     return u, u.view(np.float32), vraw[voff:voff + PACKET]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def intersect16(scene, valid, packet):  # pragma: no cover - compiled
     """``rtcIntersect16`` of the lanes whose ``valid`` word is -1 (int32 (16,)) through the
     ``RTCRayHit16`` ``packet`` (uint32 (16 · PACKET_WORDS,); both aligned to 64 bytes):
@@ -199,7 +200,7 @@ def intersect16(scene, valid, packet):  # pragma: no cover - compiled
     _rtc_intersect16(valid.ctypes.data, scene, packet.ctypes.data, 0)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def occluded16(scene, valid, packet):  # pragma: no cover - compiled
     """``rtcOccluded16`` of the lanes whose ``valid`` word is -1: a blocked lane's tfar
     becomes -inf."""
@@ -228,7 +229,7 @@ _RAY_WORDS = 12
 _HIT_END = _GEOM + 1
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def _query_lanes(scene, valid, packet, nearest):  # pragma: no cover - compiled
     """Each lane of ``packet`` whose ``valid`` word is -1, copied into one ``RTCRay(Hit)``
     on the caller's stack and traced alone: ``rtcIntersect1`` (``nearest``; its tfar and
@@ -252,7 +253,7 @@ def _query_lanes(scene, valid, packet, nearest):  # pragma: no cover - compiled
                 packet[w * W + lane] = one[w]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def intersect_lanes(scene, valid, packet):  # pragma: no cover - compiled
     """:func:`intersect16`'s answer, ray by ray: each lane whose ``valid`` word is -1 is
     copied into one ``RTCRayHit`` on the caller's stack, traced by ``rtcIntersect1``, and
@@ -266,14 +267,14 @@ def intersect_lanes(scene, valid, packet):  # pragma: no cover - compiled
     _query_lanes(scene, valid, packet, True)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def occluded_lanes(scene, valid, packet):  # pragma: no cover - compiled
     """:func:`occluded16`'s answer, ray by ray (``rtcOccluded1`` on a copy of each valid
     lane's ray, as :func:`intersect_lanes`): a blocked lane's tfar becomes -inf."""
     _query_lanes(scene, valid, packet, False)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def intersect_packet(scene, valid, packet, native16):  # pragma: no cover - compiled
     """The packet's nearest hits by :func:`intersect16` (``native16``) or ray by ray by
     :func:`intersect_lanes`: the same answer (the SIMD lanes, :func:`native_packets`)."""
@@ -283,7 +284,7 @@ def intersect_packet(scene, valid, packet, native16):  # pragma: no cover - comp
         intersect_lanes(scene, valid, packet)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def occluded_packet(scene, valid, packet, native16):  # pragma: no cover - compiled
     """The packet's occlusion by :func:`occluded16` (``native16``) or ray by ray by
     :func:`occluded_lanes`."""
@@ -293,7 +294,7 @@ def occluded_packet(scene, valid, packet, native16):  # pragma: no cover - compi
         occluded_lanes(scene, valid, packet)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True, _nrt=True)  # its buffer is a heap array
 def rayhit_buffer():  # pragma: no cover - compiled
     """(float32 view, uint32 view, address) of a fresh RTCRayHit, aligned to 64 bytes."""
     raw = np.empty(RAYHIT_WORDS, np.uint32)
@@ -302,7 +303,7 @@ def rayhit_buffer():  # pragma: no cover - compiled
     return u.view(np.float32), u, u.ctypes.data
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def _set_ray(f, u, ox, oy, oz, dx, dy, dz, tfar):  # pragma: no cover - compiled
     """The RTCRay: origin, tnear 0, direction, time 0, tfar, every mask bit, id/flags 0."""
     f[0], f[1], f[2], f[3] = ox, oy, oz, 0.0
@@ -311,7 +312,7 @@ def _set_ray(f, u, ox, oy, oz, dx, dy, dz, tfar):  # pragma: no cover - compiled
     u[_MASK], u[_MASK + 1], u[_MASK + 2] = _INVALID, 0, 0
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def intersect1(scene, f, u, addr, ox, oy, oz, dx, dy, dz, tfar):  # pragma: no cover
     """Nearest hit of the ray o + t d, 0 < t < ``tfar`` (float32 BVH coordinates) in the
     scene ``scene`` (an ``RTCScene`` handle), through the buffer of :func:`rayhit_buffer`:
@@ -324,7 +325,7 @@ def intersect1(scene, f, u, addr, ox, oy, oz, dx, dy, dz, tfar):  # pragma: no c
     return f[_TFAR], np.int32(u[_PRIM]), f[_HIT_U], f[_HIT_V]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, nogil=True, forceinline=True)
 def occluded1(scene, f, u, addr, ox, oy, oz, dx, dy, dz, tfar):  # pragma: no cover
     """Whether anything in ``scene`` lies on the segment o + t d, 0 < t < ``tfar``."""
     _set_ray(f, u, ox, oy, oz, dx, dy, dz, tfar)

@@ -129,8 +129,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
+from ..jit import njit
 from ..scene.description import AOV_COMPONENTS, aov_components
 
 log = logging.getLogger("relray")

@@ -55,8 +55,8 @@ What makes LLVM vectorise the loops: the lanes' arrays live on the kernel's own 
 (:func:`.stack.stack_array`, no owner and no reference counting), so LLVM knows that
 nothing the loops write aliases the scene's tables they read (with heap arrays it found
 "unsafe dependent memory operations" and vectorised nothing); each loop is a function
-inlined into the kernel (:data:`_LANES`), with fewer than 30 arguments (Python 3.11
-passes more as ``*args``, which numba cannot inline); its code is one straight run of
+that LLVM inlines into the kernel (:data:`_LANES`: ``forceinline``,
+:mod:`relray.core.jit`); its code is one straight run of
 selects (:func:`.sampling.sincos_2pi`'s quadrant, :func:`.lights.sample_triangle`).
 
 The estimator is :func:`.whole_paths.lambert_paths`', sample for sample (the same random
@@ -81,8 +81,8 @@ import threading
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from ..jit import njit
 from ..physics.relativity import aberrate_doppler_lane
 from ..physics.rgb_table import doppler_columns, lambda_of_grid_column
 from ..scene.geometry import ray_offset_at
@@ -194,11 +194,11 @@ def applies(sc: KernelScene, accel: object, features: bool) -> bool:
             and (not sc.env_on or len(sc.env_nm) == 0) and len(sc.l_kind) > 0)
 
 
-_LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, inline="always")
-"""The lane loops' compile options: inlined into :func:`lane_paths`, where the lanes'
-arrays are its own stack memory (:func:`.stack.stack_array`), so LLVM knows that nothing
-the loops read from the scene's arrays is written by them and vectorises each loop over
-the lanes."""
+_LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, forceinline=True)
+"""The lane loops' compile options: inlined by LLVM into :func:`lane_paths`
+(:mod:`relray.core.jit`), where the lanes' arrays are its own stack memory
+(:func:`.stack.stack_array`), so LLVM knows that nothing the loops read from the scene's
+arrays is written by them and vectorises each loop over the lanes."""
 
 
 @njit(**_LANES)
@@ -211,7 +211,7 @@ def fill_packet(ray, path, hit, hitf, valid):  # pragma: no cover - compiled
         valid[lane] = -1 if path[lane] >= 0 else 0
 
 
-@njit(nogil=True, error_model="numpy", inline="always")
+@njit(nogil=True, error_model="numpy", forceinline=True)
 def lane_lerp(table, row, i, f):  # pragma: no cover - compiled
     """:func:`.integrator.lerp` with unsigned indices: table[row, i] (1 - f) +
     table[row, i + 1] f. numba turns a negative signed index into one from the end, and
@@ -223,7 +223,7 @@ def lane_lerp(table, row, i, f):  # pragma: no cover - compiled
     return a + f * (table[r, c + np.uint64(1)] - a)
 
 
-@njit(nogil=True, error_model="numpy", inline="always")
+@njit(nogil=True, error_model="numpy", forceinline=True)
 def record_point(rec, tri, b1, b2):  # pragma: no cover - compiled
     """A hit's triangle from its record (:func:`.integrator.triangle_records`): the point
     v0 + b1 e1 + b2 e2, the unit geometric normal, the area, the light pmf and the
@@ -237,7 +237,7 @@ def record_point(rec, tri, b1, b2):  # pragma: no cover - compiled
             rec[tri, REC_AREA], rec[tri, REC_PMF], np.uint64(rec[tri, REC_MAT]))
 
 
-@njit(nogil=True, error_model="numpy", inline="always")
+@njit(nogil=True, error_model="numpy", forceinline=True)
 def prefetch_hits(rec, path, hit):  # pragma: no cover - compiled
     """Prefetch the packed record (:func:`.integrator.triangle_records`) of each lane's
     hit triangle: :func:`shade_hits` gathers them after :func:`bounce_numbers`, whose

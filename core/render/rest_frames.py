@@ -34,8 +34,8 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from ..jit import njit
 from ..scene.worldlines import Segment
 from .accel import MISS_DISTANCE, Accel, Hits, as_rays
 from .embree import intersect1, occluded1, rayhit_buffer
@@ -81,7 +81,7 @@ SEG_COLUMNS = 24
 _FAST = {"contract"}
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, forceinline=True)
 def rest_ray(ox, oy, oz, dx, dy, dz, t, best, sf, s):  # pragma: no cover - compiled
     """The lab ray (accelerator-local origin o, unit d, origin lab time t) as a ray of
     segment ``s`` (row ``s`` of a :class:`SegmentTable`'s ``sf`` = ``f``: u = b h, its
@@ -123,7 +123,7 @@ def rest_ray(ox, oy, oz, dx, dy, dz, t, best, sf, s):  # pragma: no cover - comp
     return kept, sx, sy, sz, bx, by, bz, lo, length
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 def meets_box(ox, oy, oz, dx, dy, dz, s_max, lo, hi):  # pragma: no cover - compiled
     """Whether the segment o + s d, 0 < s < s_max, meets the box [lo, hi] (slab test in
     float64; a ray along a slab's plane meets it only if its origin lies between the
@@ -150,7 +150,7 @@ def meets_box(ox, oy, oz, dx, dy, dz, s_max, lo, hi):  # pragma: no cover - comp
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 def reaches_box(sf, s, sx, sy, sz, bx, by, bz, length):  # pragma: no cover - compiled
     """Whether segment ``s``'s rest-frame ray (:func:`rest_ray`: start, B, lab length)
     meets its group's bounding box (BVH coordinates, ``LO``, ``HI`` of ``sf``) before
@@ -162,7 +162,7 @@ def reaches_box(sf, s, sx, sy, sz, bx, by, bz, length):  # pragma: no cover - co
                      (sf[s, HI], sf[s, HI + 1], sf[s, HI + 2]))
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, forceinline=True)
 def nearest_ray(static, box_lo, box_hi, st, f, w, addr, ox, oy, oz, dx, dy, dz, t, cs,
                 rest, i):  # pragma: no cover - compiled
     """The nearest hit of one lab ray (float32 accelerator-local origin o, unit d, origin
@@ -237,7 +237,7 @@ def moving_hits(static, box_lo, box_hi, st, rayhit, o, d, t, seg, rest, best, pr
             d[i, 1], d[i, 2], t[i], seg[i], rest, i)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST, forceinline=True)
 def blocked1(static, box_lo, box_hi, handle, sf, f, w, addr, ox, oy, oz, dx, dy, dz, tmax,
              t):  # pragma: no cover - compiled
     """Whether the lab segment from event (t, o) along d (float32 o, d, ``tmax``), 0 < s <

@@ -46,9 +46,9 @@ import os
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
 from ..errors import UserError
+from ..jit import njit
 from ..physics import spectrum
 from ..physics.rgb_table import (  # noqa: F401  (re-exported for the integrator)
     band_coordinate,
@@ -334,7 +334,7 @@ def bounce_spread(spread, alpha, delta):
     return spread + min(alpha, DIFFUSE_SPREAD)
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def wrap_index(i, n, mode):
     """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2); a repeat of
     a power-of-two size n is i & (n - 1) (two's complement: the same as i mod n, without
@@ -349,10 +349,11 @@ def wrap_index(i, n, mode):
 
 
 # The lookups read arrays, so they are inlined and straight-line (selects, no branch or
-# loop), as integrator.py's device functions: numba then keeps no reference counts on the
+# loop), as integrator.py's device functions: they keep no reference counts on the
 # arrays (a call, or a branch, costs atomic increments per lookup). They are inlined into
 # slot_texel_of. shade calls slot_texel, which wraps it compiled apart (its five call
-# sites inlined made up a third of shade's compile time, issue 12); the Lambert kernels
+# sites inlined made up a third of shade's compile time when numba copied inlined IR,
+# issue 12); the Lambert kernels
 # (whole paths, SIMD lanes) inline the ``_of`` forms at one call site
 # (whole_paths.lambert_texels): a compiled-apart call copies seven array structures, and
 # the textured box's CPU per path was 1.12× with the calls (bench/ab.py, 6 pairs).
@@ -362,7 +363,7 @@ def wrap_index(i, n, mode):
 # (triangle_uv, normal_mapped, texel_reflectance, texel_emission): compiled with reference
 # counting, each call counted its array arguments up and down again (6 % of the textured
 # scene's time, perf).
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
     nearest texel centres (module docstring)."""
@@ -389,7 +390,7 @@ def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     return c0, c1, c2, c3
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
     """RGBA of texture ``tex`` at (u, v) and the fractional level of detail ``lod``
     (clamped to [0, levels - 1]): linear between the bilinear lookups of the two levels
@@ -416,7 +417,7 @@ def slot_texel(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod,
                          m, slot, u, v, lod_geo)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 def slot_texel_of(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
                   u, v, lod_geo):
     """The factor-weighted RGBA texel of material m's ``slot`` at the triangle's (u, v)
@@ -447,7 +448,7 @@ def base_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v,
                               np.int64(BASE), u, v, lod), out)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 def base_colour(t, out):
     """A base-colour texel ``t`` (RGBA), each channel clamped to [0, 1], into ``out[:3]``."""
     out[0] = min(max(t[0], 0.0), 1.0)
@@ -464,7 +465,7 @@ def scalar_texel(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod
                                         mat_lod, m, slot, u, v, lod), mat_ch[m, slot])
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 def scalar_channel(t, c):
     """Channel ``c`` of a scalar slot's texel ``t``, clamped to [0, 1]."""
     return min(max(channel(t, c), 0.0), 1.0)
@@ -500,7 +501,7 @@ def triangle_uv(tri_uv, tri, b1, b2):
     return triangle_uv_of(tri_uv, tri, b1, b2)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 def triangle_uv_of(tri_uv, tri, b1, b2):
     """The UV at barycentrics (b1, b2) of triangle ``tri`` and its UV edges
     (uv1 - uv0, uv2 - uv0)."""
@@ -526,7 +527,7 @@ def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     return normal_mapped_of(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
 def normal_mapped_of(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     """The normal of a tangent-space normal map's texel (r, g, b) ∈ [0, 1]³ at a hit
     whose interpolated (or geometric) normal is ``n0`` (on the triangle's front side):
@@ -598,7 +599,7 @@ def texel_reflectance(rgb, rgb_mode, cscale, cdata, lamu, pi, uv_over, ir_over, 
             rho[j] = s[j]
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy", fastmath=False)
 def cell_reflectance4(data, cell, lam):
     """:func:`rgb_table.cell_reflectance` of a :func:`rgb_table.table_cell` result at
     the four wavelengths ``lam`` (nm) at once, ρ(λ_j) = Σ_k w_k s(c_k, λ_j): the 8 nodes'

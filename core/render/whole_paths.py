@@ -65,8 +65,8 @@ import threading
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from ..jit import njit
 from ..physics.relativity import aberrate_doppler_ray
 from ..physics.spectrum import INV_DLOG
 from ..scene.geometry import ray_offset_at
@@ -524,7 +524,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
     return lambert_paths
 
 
-@njit(cache=True, nogil=True, inline="always", error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
 def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, alb):
     """The image textures of a Lambert hit (material m, triangle ``tri`` at barycentrics
     (b1, b2); ``g`` the geometric normal turned towards the ray ``d``, cos θ_g of the
@@ -542,8 +542,9 @@ def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, a
     lookups it makes (the ``_of`` forms of :mod:`.textures`), except the texel's
     spectrum: as compiled-apart calls they cost 1.12× the textured box's CPU per path
     (`bench.ab 7a57ca7 --scene textured`: 0.89 inlined, 2026-11-27). The four slots share
-    one call site in a loop, which numba inlines once: with four call sites the textured
-    lane kernel's first compile took 78 s, with one 33 s (23 s with the calls)."""
+    one call site in a loop, inlined once: with four call sites the textured lane
+    kernel's first compile took 78 s, with one 33 s (23 s with the calls), when numba
+    copied inlined IR (before :mod:`relray.core.jit`)."""
     (t_atlas, t_desc, t_rows, t_mat_tex, t_mat_ch, t_mat_uv, t_mat_factor, t_mat_lod, _,
      t_nscale, _, _, _, t_tri_uv, _, _, _, _, _, _, _) = tex
     area, e1, e2, ng, vn, has_vn = geo
@@ -551,7 +552,7 @@ def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, a
     lod = hit_lod(duv1, duv2, area[tri], cone_w, cos_g)
     base = t_mat_tex[m, BASE] >= 0
     lit = emits and t_mat_tex[m, EMISSION] >= 0
-    # the material's slots in one loop with one lookup call site, which numba inlines once
+    # the material's slots in one loop with one lookup call site, inlined once
     # (four call sites made the kernels' first compile 3× as long)
     zero = (0.0, 0.0, 0.0, 0.0)
     tb = tr = tn = etex = zero

@@ -1,0 +1,46 @@
+"""How the core's kernels are compiled: numba's ``njit`` with one rule for inlining.
+
+A helper that a kernel must have inlined (the SIMD lanes' loops, the shading's device
+functions, the physics' per-ray formulas) is declared ``njit(..., forceinline=True)``:
+it is typed and lowered once per signature as a function of its own, marked
+``alwaysinline``, and LLVM inlines it into every caller while it optimises the module, so
+the caller's constants (a kind of scene, a lane count) still fold into it and its loops
+still see the caller's stack arrays (:func:`.render.stack.stack_array`). Such a helper
+compiles without reference counting (``_nrt=False``): it borrows its caller's arrays and
+makes none on the heap, so an inlined call costs no atomic increment. Its floating-point
+flags are its own, :data:`FAST_MATH` (the render kernels') unless it says otherwise
+(``rgb_table``'s exact ones, ``rest_frames``' contractions only): compiled once, it
+cannot take each caller's flags as an IR copy did.
+
+numba's own ``inline="always"`` copies the callee's IR into each call site before typing
+instead. numba 0.68 deep-copies the callee's whole variable scope once for each of its
+blocks there (numba issues #8989 and #9204; numba-cuda #688 measures the same), so a
+kernel of nested inlined helpers spent three quarters of its compile time copying IR: a
+kind of SIMD-lane kernel took 44 s to compile, 13 s with ``forceinline`` (issue 12).
+
+Every other function says ``forceinline=False``: numba lets a callee inherit
+``forceinline``, ``_nrt`` and ``fastmath`` from whichever function's compilation reaches
+it first, so without it a helper would be inlined or called depending on which kernel
+happened to compile first (and an inlined helper's flags would).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numba
+
+#: The render kernels' fast-math flags (the shading, whole paths, the SIMD lanes): without
+#: ``nnan``/``ninf``, so NaN and infinity checks keep their meaning.
+FAST_MATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+
+def njit(*args: Any, **options: Any) -> Any:
+    """``numba.njit`` with ``forceinline=False`` unless given; a ``forceinline=True``
+    helper with ``_nrt=False`` and ``fastmath=FAST_MATH`` unless given (module
+    docstring)."""
+    options.setdefault("forceinline", False)
+    if options["forceinline"]:
+        options.setdefault("_nrt", False)
+        options.setdefault("fastmath", set(FAST_MATH))
+    return numba.njit(*args, **options)
