@@ -14,7 +14,7 @@ import pytest
 CORE = Path(__file__).resolve().parents[1] / "core"
 
 #: Layers in data-flow order: a module may import its own layer and the layers before it.
-LAYERS = ["__init__", "errors", "files", "resources", "physics", "scene", "render", "output",
+LAYERS = ["__init__", "errors", "files", "resources", "jit", "physics", "scene", "render", "output",
           "progress", "runner", "warmup", "farm", "cli"]
 
 #: Imports allowed inside functions: optional or heavy libraries used by one code path.

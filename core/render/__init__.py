@@ -7,5 +7,5 @@ light table and light sampling (:mod:`.lights`), the kernels' spectral tables
 (:mod:`.film`) and one frame's work split over threads (:mod:`.frames`).
 
 May import: :mod:`relray.core.physics`, :mod:`relray.core.scene`,
-:mod:`relray.core.errors`.
+:mod:`relray.core.errors`, :mod:`relray.core.jit`.
 """

@@ -9,5 +9,5 @@ camera's path through an animation (:mod:`.motion`), the job's peak memory
 (:mod:`.footprint`) and the frame-name template formatted safely (:mod:`.names`).
 
 May import: :mod:`relray.core.physics`, :mod:`relray.core.errors`,
-:mod:`relray.core.files`, :mod:`relray.core.resources`.
+:mod:`relray.core.files`, :mod:`relray.core.resources`, :mod:`relray.core.jit`.
 """
