@@ -8,9 +8,12 @@ the caller's constants (a kind of scene, a lane count) still fold into it and it
 still see the caller's stack arrays (:func:`.render.stack.stack_array`). Such a helper
 compiles without reference counting (``_nrt=False``): it borrows its caller's arrays and
 makes none on the heap, so an inlined call costs no atomic increment. Its floating-point
-flags are its own, :data:`FAST_MATH` (the render kernels') unless it says otherwise
-(``rgb_table``'s exact ones, ``rest_frames``' contractions only): compiled once, it
-cannot take each caller's flags as an IR copy did.
+flags are its own, compiled once (it cannot take each caller's flags as an IR copy did):
+exact IEEE arithmetic unless it says otherwise. The render kernels' own modules
+(``integrator``, ``whole_paths``, ``lane_paths``, ``bsdf``, ``lights``, ``textures``,
+``environment``, ``arcs``) give theirs :data:`FAST_MATH`; the physics, the camera and
+the samplers stay exact, so a formula gives the same bits inlined into a vector loop as
+called alone (``tests/test_camera.py``, ``tests/test_textures.py``).
 
 numba's own ``inline="always"`` copies the callee's IR into each call site before typing
 instead. numba 0.68 deep-copies the callee's whole variable scope once for each of its
@@ -37,10 +40,9 @@ FAST_MATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 def njit(*args: Any, **options: Any) -> Any:
     """``numba.njit`` with ``forceinline=False`` unless given; a ``forceinline=True``
-    helper with ``_nrt=False`` and ``fastmath=FAST_MATH`` unless given (module
-    docstring)."""
+    helper with ``_nrt=False`` and ``fastmath=False`` unless given (module docstring)."""
     options.setdefault("forceinline", False)
     if options["forceinline"]:
         options.setdefault("_nrt", False)
-        options.setdefault("fastmath", set(FAST_MATH))
+        options.setdefault("fastmath", False)
     return numba.njit(*args, **options)

@@ -211,7 +211,7 @@ def fill_packet(ray, path, hit, hitf, valid):  # pragma: no cover - compiled
         valid[lane] = -1 if path[lane] >= 0 else 0
 
 
-@njit(nogil=True, error_model="numpy", forceinline=True)
+@njit(nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
 def lane_lerp(table, row, i, f):  # pragma: no cover - compiled
     """:func:`.integrator.lerp` with unsigned indices: table[row, i] (1 - f) +
     table[row, i + 1] f. numba turns a negative signed index into one from the end, and
@@ -223,7 +223,7 @@ def lane_lerp(table, row, i, f):  # pragma: no cover - compiled
     return a + f * (table[r, c + np.uint64(1)] - a)
 
 
-@njit(nogil=True, error_model="numpy", forceinline=True)
+@njit(nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
 def record_point(rec, tri, b1, b2):  # pragma: no cover - compiled
     """A hit's triangle from its record (:func:`.integrator.triangle_records`): the point
     v0 + b1 e1 + b2 e2, the unit geometric normal, the area, the light pmf and the
@@ -237,7 +237,7 @@ def record_point(rec, tri, b1, b2):  # pragma: no cover - compiled
             rec[tri, REC_AREA], rec[tri, REC_PMF], np.uint64(rec[tri, REC_MAT]))
 
 
-@njit(nogil=True, error_model="numpy", forceinline=True)
+@njit(nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
 def prefetch_hits(rec, path, hit):  # pragma: no cover - compiled
     """Prefetch the packed record (:func:`.integrator.triangle_records`) of each lane's
     hit triangle: :func:`shade_hits` gathers them after :func:`bounce_numbers`, whose

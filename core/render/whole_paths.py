@@ -524,7 +524,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
     return lambert_paths
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
 def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, alb):
     """The image textures of a Lambert hit (material m, triangle ``tri`` at barycentrics
     (b1, b2); ``g`` the geometric normal turned towards the ray ``d``, cos θ_g of the

@@ -36,6 +36,30 @@ if HOST:
 else:
     collect_ignore = [p.name for p in HERE.glob("test_*.py") if p.name != RUNNER]
 
+    def _runner_items(items: list) -> list:
+        return [i for i in items if i.path.name == RUNNER]
+
+    def pytest_collection_modifyitems(session, config, items):
+        """The bpy-module runner's tests last (its child runs beside the others)."""
+        late = _runner_items(items)
+        items[:] = [i for i in items if i.path.name != RUNNER] + late
+
+    def pytest_collection_finish(session):
+        """Start the bpy-module child now when its tests are selected
+        (``test_bpy_module.start_child``)."""
+        if session.config.option.collectonly or not any(
+                i.name.startswith(("test_under_bpy_module", "test_child_exit_code"))
+                for i in _runner_items(session.items)):
+            return
+        runner = sys.modules.get(RUNNER[:-3])
+        if runner is not None and runner.BPY_PYTHON:
+            runner.start_child(session.config)
+
+    def pytest_sessionfinish(session):
+        runner = sys.modules.get(RUNNER[:-3])
+        if runner is not None:
+            runner.stop_child(session.config)
+
 EXT_MODULE = "bl_ext.user_default.relray"
 
 

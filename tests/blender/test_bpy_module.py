@@ -4,7 +4,9 @@ Blender as a Python module can be imported once per process and must see a fresh
 ``BLENDER_USER_RESOURCES`` before it is imported, so the add-on tests run in a child
 ``python -m pytest tests/blender`` with ``RELRAY_BLENDER_HOST=bpy-module``. This file
 reports each of the child's tests as one test here (names found by reading the test
-files), with the child's failure text, so ``make test`` shows them one by one.
+files), with the child's failure text, so ``make test`` shows them one by one. The child
+starts as soon as the suite is collected and these tests run last (conftest.py), so it
+runs beside the rest of the suite: the two cores are both busy.
 
 The extension zip is built first with Blender's extension CLI (from the bpy module),
 without wheels: the child imports the core's dependencies from this venv. The user
@@ -20,6 +22,8 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -45,46 +49,85 @@ def inner_tests() -> list[str]:
     return ids
 
 
-@pytest.fixture(scope="session")
-def child_run(tmp_path_factory) -> dict[str, tuple[str, str]]:
-    """Build the zip, run the add-on tests once in a bpy-module child; results by id."""
+#: The child's record in the session's stash (:func:`start_child`).
+CHILD = pytest.StashKey[dict]()
+
+#: The child's time limit, from its start.
+CHILD_TIMEOUT_S = 3600
+
+
+def start_child(config: pytest.Config) -> dict:
+    """Build the zip and start the bpy-module child, once per session: conftest.py's
+    ``pytest_collection_finish`` calls this as soon as the tests are collected, and puts
+    this file's tests last, so the child (one core, mostly compiling) runs beside the
+    rest of the suite; :func:`child_run` waits for it. The record's ``error`` says why
+    no child could start."""
+    if CHILD in config.stash:
+        return config.stash[CHILD]
     import importlib.util
 
+    record: dict = {"error": None, "proc": None}
+    config.stash[CHILD] = record
     if importlib.util.find_spec("bpy") is None:
-        pytest.fail("the bpy module is missing: it is a dev dependency on Python 3.11 "
-                    "(pip install -e '.[dev]', or make venv)")
+        record["error"] = ("the bpy module is missing: it is a dev dependency on Python 3.11 "
+                           "(pip install -e '.[dev]', or make venv)")
+        return record
     from relray.relblend import packaging as relray_packaging  # no bpy needed here
 
-    work = tmp_path_factory.mktemp("blender")
+    work = Path(tempfile.mkdtemp(prefix="relray-bpy-child-"))
     zip_path = relray_packaging.build_test_zip(work / "relray-test.zip")
     user = REPO / ".cache" / "blender-test-user"
     shutil.rmtree(user, ignore_errors=True)
     user.mkdir(parents=True)
-    junit = work / "junit.xml"
     env = dict(os.environ, RELRAY_BLENDER_HOST="bpy-module", RELRAY_TEST_ZIP=str(zip_path),
                BLENDER_USER_RESOURCES=str(user))
     env.setdefault("NUMBA_CACHE_DIR", str(REPO / ".cache" / "numba"))
-    proc = subprocess.run(
-        [sys.executable, "-m", "pytest", str(HERE), "-q", "-rA", "-p", "no:cacheprovider",
-         f"--junitxml={junit}", "-o", "junit_family=xunit2", "-s"],
-        cwd=REPO, env=env, capture_output=True, text=True, timeout=3600)
-    log = work / "child.log"
-    log.write_text(proc.stdout + proc.stderr, encoding="utf-8")
-    print(proc.stdout[-6000:])
+    record.update(junit=work / "junit.xml", log=work / "child.log", started=time.monotonic())
+    with open(record["log"], "w", encoding="utf-8") as out:
+        record["proc"] = subprocess.Popen(
+            [sys.executable, "-m", "pytest", str(HERE), "-q", "-rA", "-p", "no:cacheprovider",
+             f"--junitxml={record['junit']}", "-o", "junit_family=xunit2", "-s"],
+            cwd=REPO, env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT)
+    return record
+
+
+def stop_child(config: pytest.Config) -> None:
+    """Kill a child still running when the session ends (``-x``, an interrupt)."""
+    record = config.stash.get(CHILD, None)
+    if record and record["proc"] is not None and record["proc"].poll() is None:
+        record["proc"].kill()
+        record["proc"].wait()
+
+
+@pytest.fixture(scope="session")
+def child_run(request) -> dict[str, tuple[str, str]]:
+    """The add-on tests' results by id, from the bpy-module child (:func:`start_child`)."""
+    record = start_child(request.config)
+    if record["error"]:
+        pytest.fail(record["error"])
+    proc = record["proc"]
+    try:
+        proc.wait(timeout=max(1.0, CHILD_TIMEOUT_S - (time.monotonic() - record["started"])))
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    log = record["log"]
+    text = log.read_text(encoding="utf-8", errors="replace")
+    print(text[-6000:])
+    junit = record["junit"]
     results: dict[str, tuple[str, str]] = {}
     if junit.exists():
         for case in ET.parse(junit).getroot().iter("testcase"):
             key = f"{Path(case.get('file') or case.get('classname').replace('.', '/')).stem}" \
                   f".py::{case.get('name')}"
-            status, text = "passed", ""
+            status, text_ = "passed", ""
             for tag in ("failure", "error", "skipped"):
                 el = case.find(tag)
                 if el is not None:
                     status = "skipped" if tag == "skipped" else "failed"
-                    text = (el.get("message") or "") + "\n" + (el.text or "")
-            results[key] = (status, text)
-    results["__exit__"] = (str(proc.returncode), f"child log: {log}\n"
-                                                 + (proc.stdout + proc.stderr)[-4000:])
+                    text_ = (el.get("message") or "") + "\n" + (el.text or "")
+            results[key] = (status, text_)
+    results["__exit__"] = (str(proc.returncode), f"child log: {log}\n" + text[-4000:])
     return results
 
 
