@@ -64,6 +64,7 @@ from numba import njit
 from relray.bench import common as cm
 from relray.bench import profile_scenes, velocity_groups
 from relray.bench.peer_scenes import MOVING_GROUPS
+from relray.core.jit import FAST_MATH
 from relray.core.render import lane_paths, whole_paths
 from relray.core.render.accel import MISS_DISTANCE, Accel
 from relray.core.render.embree import (
@@ -77,7 +78,7 @@ from relray.core.render.embree import (
     packet_buffers,
     set_packet_ray,
 )
-from relray.core.render.integrator import FAST_MATH, RR_DEPTH, trace
+from relray.core.render.integrator import RR_DEPTH, trace
 from relray.core.render.rest_frames import MovingScene
 from relray.core.render.sampling import (
     DIM_BSDF,

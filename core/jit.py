@@ -11,9 +11,10 @@ makes none on the heap, so an inlined call costs no atomic increment. Its floati
 flags are its own, compiled once (it cannot take each caller's flags as an IR copy did):
 exact IEEE arithmetic unless it says otherwise. The render kernels' own modules
 (``integrator``, ``whole_paths``, ``lane_paths``, ``bsdf``, ``lights``, ``textures``,
-``environment``, ``arcs``) give theirs :data:`FAST_MATH`; the physics, the camera and
-the samplers stay exact, so a formula gives the same bits inlined into a vector loop as
-called alone (``tests/test_camera.py``, ``tests/test_textures.py``).
+``environment``, ``arcs``) give theirs :data:`FAST_MATH` (``@njit(**INLINE_FAST)``);
+the physics, the camera and the samplers stay exact (``@njit(**INLINE)``), so a formula
+gives the same bits inlined into a vector loop as called alone (``tests/test_camera.py``,
+``tests/test_textures.py``).
 
 numba's own ``inline="always"`` copies the callee's IR into each call site before typing
 instead. numba 0.68 deep-copies the callee's whole variable scope once for each of its
@@ -36,6 +37,16 @@ import numba
 #: The render kernels' fast-math flags (the shading, whole paths, the SIMD lanes): without
 #: ``nnan``/``ninf``, so NaN and infinity checks keep their meaning.
 FAST_MATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+#: The options of an inlined helper with exact arithmetic (the physics, the camera, the
+#: samplers): ``@njit(**INLINE)``. Cached, without the GIL, numpy's error model (a
+#: division by zero gives inf or NaN, as in the kernels), ``alwaysinline``.
+INLINE: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy",
+                          "forceinline": True}
+
+#: The options of an inlined helper of the render kernels' own modules (module
+#: docstring): :data:`INLINE` with :data:`FAST_MATH`, ``@njit(**INLINE_FAST)``.
+INLINE_FAST: dict[str, Any] = {**INLINE, "fastmath": FAST_MATH}
 
 
 def njit(*args: Any, **options: Any) -> Any:

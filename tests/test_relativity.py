@@ -23,8 +23,8 @@ from hypothesis import strategies as st
 from numba import njit
 
 from relray.core.errors import UserError
+from relray.core.jit import FAST_MATH
 from relray.core.physics import relativity as rel
-from relray.core.render.integrator import FAST_MATH
 
 EPS = float(np.finfo(np.float64).eps)
 X, Y, Z = np.eye(3)

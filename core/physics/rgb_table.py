@@ -46,7 +46,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import user_cache_dir
-from ..jit import njit
+from ..jit import INLINE, njit
 from ..resources import usable_cores
 from . import sigmoid as _sig
 from .spectrum import INV_DLOG, LOG_GRID_MIN, SIGMOID_BAND_NM, reflectance_fit_model
@@ -184,7 +184,7 @@ def _store(path: Path, table: CoefficientTable) -> None:
             "on every run", path, e.strerror or e)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def _interval(scale, z):
     """k with scale[k] ≤ z < scale[k+1] (0 ≤ k ≤ len-2; z clamped), by bisection."""
     lo, hi = 0, scale.shape[0] - 1
@@ -197,7 +197,7 @@ def _interval(scale, z):
     return lo
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def table_cell(scale, data, r, g, b):
     """Where the linear Rec.709 reflectance (r, g, b) (each clamped to [0, 1]) falls in
     the table: (grey c2 or NaN, largest channel, z, y, x node indices, fz, fy, fx
@@ -224,7 +224,7 @@ def table_cell(scale, data, r, g, b):
     return math.nan, big, zi, yi, xi, fz, y - yi, x - xi
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def table_coefficients(scale, data, r, g, b):
     """(c0, c1, c2) of (r, g, b) interpolated trilinearly in the table (exact for greys).
 
@@ -275,7 +275,7 @@ def cell_reflectance(data, cell, lam_nm):
     return out
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def table_reflectance(scale, data, r, g, b, lam_nm):
     """ρ(λ) of the reflectance (r, g, b) (:func:`table_cell`, :func:`cell_reflectance`)."""
     return cell_reflectance(data, table_cell(scale, data, r, g, b), lam_nm)
@@ -297,7 +297,7 @@ def band_coordinate(lam_nm):
     return (min(max(lam_nm, _BAND_LO), _BAND_HI) - _BAND_LO) * _INV_BAND
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def lambda_of_column(u):
     """λ in nm of the fractional column u of :mod:`.spectrum`'s log-spaced lab grid
     (the kernels' ``lamu``): exp(ln λ_min + u / INV_DLOG)."""
@@ -342,7 +342,7 @@ _ATANH_SERIES = tuple(1.0 / (2 * k + 1) for k in range(11))
 _SQRT2 = math.sqrt(2.0)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def _exponent_step(m, e, k):
     """m · 2⁻ᵏ, e + k where m ≥ 2ᵏ; m · 2ᵏ, e − k where m < 2⁻ᵏ; else m, e (selects)."""
     big, small = 2.0 ** k, 2.0 ** -k

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import user_cache_dir
-from ..jit import njit
+from ..jit import INLINE, njit
 
 # A colour counts as converged when every RGB residual is below this (absolute, linear RGB).
 # 1e-12 is ~1e4 float64 ulps of a unit value and far below what any ΔE00 can resolve
@@ -363,7 +363,7 @@ _SUMS = {"reassoc", "contract"}
 _X32_MAX = 1e12
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def _sigmoid_one(x):
     """(s(x), ds/dx) of one value, as :func:`sigmoid` and :func:`sigmoid_derivative`."""
     a = abs(x)
@@ -429,7 +429,7 @@ def model_jacobian(c0, c1, c2, t32, B32, b_uv, b_ir, uv, ir):
             j20 + e2, j21 + e2, j22 + e2 + du * b_uv[2])
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def _lm_step(J, r0, r1, r2, mu):
     """The Levenberg–Marquardt step δ = -(JᵀJ + μ diag(JᵀJ) + ε)⁻¹ Jᵀr of :func:`fit`
     (ε: 1e-300 + 1e-14 max diag, so a flat direction never makes it singular), by the

@@ -62,7 +62,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import INLINE, njit
 from . import cie_tables as _cie
 from . import sigmoid as _sig
 
@@ -429,7 +429,7 @@ def guide_table(cdf: np.ndarray, size: int | None = None) -> np.ndarray:
     return np.clip(np.searchsorted(cdf, edges, side="right") - 1, 0, n - 1).astype(np.int32)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def guided_bin(cdf, guide, u):
     """The bin k of a CDF of n bins with cdf[k] ≤ u < cdf[k + 1] (the last such k where
     steps are empty; clamped to [0, n − 1]), u ∈ [0, 1): from the guide table's entry
@@ -445,7 +445,7 @@ def guided_bin(cdf, guide, u):
     return k
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def _cell_lambda(inv_nm, v):
     """(cell g, fraction f in it, λ) of the inverse-CDF table at v ∈ [0, 1)
     (:meth:`WavelengthSampler.sample`'s arithmetic; compiled with a fused multiply-add,

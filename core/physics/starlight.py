@@ -66,7 +66,7 @@ import math
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import INLINE, njit
 from . import spectrum
 
 __all__ = ["BV_MIN", "BV_MAX", "ZERO_POINT_Y", "temperature_from_bv", "luminous_flux",
@@ -102,7 +102,7 @@ _C1_NM = spectrum._C1 * 1e36
 _C2_NM_K = spectrum._C2_NM_K
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def _planck(lam_nm, T):
     """B_λ(λ, T) (W·m⁻²·sr⁻¹·nm⁻¹), as :func:`spectrum.planck`; 0 where e^x overflows."""
     x = _C2_NM_K / (lam_nm * T)

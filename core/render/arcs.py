@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 
-from ..jit import FAST_MATH, njit
+from ..jit import INLINE_FAST, njit
 
 _ATAN = (-0.33333333333329085, 0.19999999998871204, -0.14285714181660486,
          0.1111110621800967, -0.09090774107201532, 0.07689968578188999,
@@ -43,7 +43,7 @@ _QUARTER_PI = 0.25 * math.pi
 _HALF_PI = 0.5 * math.pi
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def _odd_series(s, c):
     """s + s³ Σ_k c[k] s²ᵏ, by Horner's rule in s² (a loop of constant length: LLVM
     unrolls it, so a loop over lanes that calls this stays vector code)."""
@@ -54,7 +54,7 @@ def _odd_series(s, c):
     return s + s * z * p
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def arctan2(y, x):
     """The angle of (x, y) from +x, in [−π, π], as libm's ``atan2`` (module docstring)."""
     ax, ay = abs(x), abs(y)
@@ -69,7 +69,7 @@ def arctan2(y, x):
     return math.copysign(a, y)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def arccos(x):
     """acos x ∈ [0, π] for |x| ≤ 1 (module docstring)."""
     ax = abs(x)

@@ -44,13 +44,13 @@ from __future__ import annotations
 
 import math
 
-from ..jit import FAST_MATH, njit
+from ..jit import INLINE_FAST, njit
 from .sampling import INV_PI, cosine_hemisphere, onb, sincos_2pi, to_world
 
 DELTA_ALPHA = 1e-3
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def ggx_d(cos_h, a2):
     """Trowbridge–Reitz normal distribution D(h)."""
     c2 = cos_h * cos_h
@@ -58,7 +58,7 @@ def ggx_d(cos_h, a2):
     return a2 / (math.pi * t * t)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def ggx_lambda(cos_t, a2):
     """Smith Λ(ω) for GGX."""
     c2 = cos_t * cos_t
@@ -68,7 +68,7 @@ def ggx_lambda(cos_t, a2):
     return 0.5 * (math.sqrt(1.0 + a2 * tan2) - 1.0)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def ggx_eval(cos_o, cos_i, cos_h, a2):
     """The conductor lobe without Fresnel and its pdf: (D G2 / (4 cos_o cos_i), pdf)."""
     if cos_o <= 0.0 or cos_i <= 0.0 or cos_h <= 0.0:
@@ -81,7 +81,7 @@ def ggx_eval(cos_o, cos_i, cos_h, a2):
     return f, pdf
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def ggx_sample_h(wo, n, alpha, u1, u2):
     """A microfacet normal h (world) drawn from the visible normals of wo (Heitz 2018)."""
     t, b = onb(n[0], n[1], n[2])
@@ -115,7 +115,7 @@ def ggx_sample_h(wo, n, alpha, u1, u2):
     return to_world(hx * inv, hy * inv, hz * inv, t, b, n[0], n[1], n[2])
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def schlick_weight(cos_d):
     """(1 - cos)⁵ of Schlick's Fresnel: F = F0 + (1 - F0)·weight."""
     m = min(1.0, max(0.0, 1.0 - cos_d))
@@ -123,7 +123,7 @@ def schlick_weight(cos_d):
     return m2 * m2 * m
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def fresnel_dielectric(cos_i, eta):
     """Unpolarised Fresnel reflectance and cos θ_t for relative IOR eta = n_t / n_i."""
     sin2_t = max(0.0, 1.0 - cos_i * cos_i) / (eta * eta)
@@ -135,14 +135,14 @@ def fresnel_dielectric(cos_i, eta):
     return 0.5 * (rs * rs + rp * rp), cos_t
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def lambert_eval(cos_i):
     """The Lambert lobe without ρ, and its pdf: (1/π, cos θ_i/π) for cos θ_i = wi·n > 0
     (the caller checks the hemisphere)."""
     return INV_PI, cos_i * INV_PI
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def principled_eval(wo, wi, n, wd, wm, a2, sel_d, sel_m):
     """Non-delta part of the material: (k_d, k_m, s, pdf) for the lane formula above.
 
@@ -170,14 +170,14 @@ def principled_eval(wo, wi, n, wd, wm, a2, sel_d, sel_m):
     return kd, km, s, pdf
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def reflect(wo, n, cos_o):
     """The mirror direction of ``wo`` about unit ``n`` (``cos_o`` = wo·n): 2 cos_o n - wo."""
     return (2.0 * cos_o * n[0] - wo[0], 2.0 * cos_o * n[1] - wo[1],
             2.0 * cos_o * n[2] - wo[2])
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def refract(wo, n, eta, cos_o, cos_t):
     """Snell's transmitted direction for relative IOR ``eta`` (``cos_o`` = wo·n > 0,
     ``cos_t`` from :func:`fresnel_dielectric`): -wo/η + (cos_o/η - cos_t) n."""
@@ -185,7 +185,7 @@ def refract(wo, n, eta, cos_o, cos_t):
     return (-wo[0] / eta + k * n[0], -wo[1] / eta + k * n[1], -wo[2] / eta + k * n[2])
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def lambert_sample(n, u1, u2):
     """A direction about ``n`` with the Lambert lobe's pdf cos θ_i / π."""
     t, b = onb(n[0], n[1], n[2])
@@ -193,7 +193,7 @@ def lambert_sample(n, u1, u2):
     return to_world(lx, ly, lz, t, b, n[0], n[1], n[2])
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def ggx_sample(wo, n, alpha, u1, u2):
     """A direction from the GGX conductor lobe (visible normals, then :func:`reflect`):
     its pdf is :func:`ggx_eval`'s. May lie below the surface (the caller rejects it)."""
@@ -201,7 +201,7 @@ def ggx_sample(wo, n, alpha, u1, u2):
     return reflect(wo, h, wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2])
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def mirror_sample(wo, n):
     """The perfect conductor (α below ``DELTA_ALPHA``): (direction, Schlick weight s);
     the lane factor is ρ + (1 - ρ) s (a delta lobe: no pdf)."""
@@ -209,7 +209,7 @@ def mirror_sample(wo, n):
     return reflect(wo, n, cos_o), schlick_weight(cos_o)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def dielectric_sample(wo, n, eta, u):
     """The smooth dielectric (relative IOR ``eta`` = n_t / n_i, ``n`` on the side of wo):
     reflect with probability F, else refract. Returns (direction, transmitted); the
@@ -221,14 +221,14 @@ def dielectric_sample(wo, n, eta, u):
     return refract(wo, n, eta, cos_o, cos_t), True
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def lane_value(kd, km, s, rho):
     """The BSDF of one hero lane from :func:`principled_eval`'s factors and ρ(λ):
     k_d ρ + k_m (ρ + (1 - ρ) s)."""
     return kd * rho + km * (rho + (1.0 - rho) * s)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def has_smooth_lobe(wd, wm, alpha):
     """Whether a material with lobe weights w_d, w_m and GGX α has a non-delta lobe (one
     that next-event estimation can serve): diffuse, or a metal rougher than
@@ -236,7 +236,7 @@ def has_smooth_lobe(wd, wm, alpha):
     return wd + (0.0 if wm > 0.0 and alpha < DELTA_ALPHA else wm) > 0.0
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def principled_sample(wo, n, g, front, wd, wm, wg, alpha, ior, ul, u1, u2):
     """The continuation from a material: ``ul`` picks a lobe by its weight ([0, w_g)
     glass, [w_g, w_g + w_m) metal, the rest diffuse), (u1, u2) its direction.
@@ -273,7 +273,7 @@ def principled_sample(wo, n, g, front, wd, wm, wg, alpha, ior, ul, u1, u2):
     return wi, (0.0, kd, km, s, c), pdf, False, False, True
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def lane_weight(weight, rho):
     """The throughput factor of one hero lane from :func:`principled_sample`'s
     ``weight`` and ρ(λ): (k_0 + k_d ρ + k_m (ρ + (1 - ρ) s)) c."""

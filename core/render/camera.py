@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import INLINE, njit
 from ..physics import relativity
 from ..physics.relativity import aberrate_doppler_ray
 from ..scene.description import CameraSettings
@@ -140,7 +140,7 @@ def _directions(rot, tan_half, aspect, scale, sx, sy, width, height, col, row, o
             rot, tan_half, aspect, scale, sx, sy, width, height, col[i], row[i])
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
+@njit(**INLINE)
 def pixel_column_row(pixel, width):
     """(column, row) of pixel index ``pixel`` = row · ``width`` + column, as float64, by
     floating-point arithmetic: row = ⌊(p + ½) · (1/w)⌋, column = p − row · w, exact for
@@ -154,7 +154,7 @@ def pixel_column_row(pixel, width):
     return p - row * width, row
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
+@njit(**INLINE)
 def camera_ray(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, hz, b, inv_g,
                key, pixel, x0, c, r2):
     """One path's camera ray (:meth:`PinholeCamera.primary_rays`): (unit d_lab, D, the
@@ -165,7 +165,7 @@ def camera_ray(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, hz, 
                          b, inv_g, key, pixel, x0, c, r2, b > 0.0, c > 0.0)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
+@njit(**INLINE)
 def camera_ray_as(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, hz, b, inv_g,
                   key, pixel, x0, c, r2, moving, outside):
     """:func:`camera_ray` of a camera that moves (``moving``: aberration and D) or not,
@@ -195,7 +195,7 @@ RAY_BLOCK = 16
 assert RAY_BLOCK == 16  # _primary_rays' stack_array(5, 16, …) holds one block
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
+@njit(**INLINE)
 def _ray_block(rot, tan_half, aspect, scale, sx, sy, width, height, hx, hy, hz, b, inv_g,
                keys, pixels, x0, c, r2, ray, i0, m, moving, outside):  # pragma: no cover
     """:func:`camera_ray_as` of paths i0 … i0 + m - 1 into the columns of ``ray`` (stack

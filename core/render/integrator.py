@@ -76,7 +76,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..jit import FAST_MATH, njit
+from ..jit import FAST_MATH, INLINE_FAST, njit
 from ..physics import spectrum
 from ..physics.relativity import aberrate_doppler_ray
 from ..physics.spectrum import INV_DLOG
@@ -377,7 +377,7 @@ def column_split(lamu, columns, li, lf):
             li[p, j], lf[p, j] = column(lamu[p, j], top)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def column(u, top):
     """(i, f) of the fractional column u clamped to [0, top] (:func:`column_split`)."""
     uc = min(max(np.float64(u), 0.0), np.float64(top))
@@ -385,7 +385,7 @@ def column(u, top):
     return i, uc - i
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def lerp(table, row, i, f):
     """table[row, i] (1 - f) + table[row, i + 1] f (see :func:`column_split`)."""
     a = table[row, i]
@@ -402,7 +402,7 @@ def lerp(table, row, i, f):
 # own, compiled once (issue 12: Cornell's cold compile 114 -> ~60 CPU s, its images
 # bit-identical). Those of every hit stay inlined: compiled apart, nee_factors and
 # lights.sample_light cost 8 % of Cornell's throughput (alternated runs, medians of 5).
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def surface_point(v0, e1, e2, ng, tri, b1, b2):
     """Point v0 + b1 e1 + b2 e2 of triangle ``tri`` and its unit geometric normal."""
     return ((v0[tri, 0] + b1 * e1[tri, 0] + b2 * e2[tri, 0],
@@ -411,14 +411,14 @@ def surface_point(v0, e1, e2, ng, tri, b1, b2):
             (ng[tri, 0], ng[tri, 1], ng[tri, 2]))
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def triangle_vectors(v0, e1, e2, ng, tri):
     """v0, e1, e2 and the unit geometric normal of triangle ``tri``."""
     return ((v0[tri, 0], v0[tri, 1], v0[tri, 2]), (e1[tri, 0], e1[tri, 1], e1[tri, 2]),
             (e2[tri, 0], e2[tri, 1], e2[tri, 2]), (ng[tri, 0], ng[tri, 1], ng[tri, 2]))
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def front_hit(ox, oy, oz, dx, dy, dz, tv, t_max):
     """Where the ray o + t d crosses the front (the side its normal faces) of the
     triangle ``tv`` (:func:`triangle_vectors`) at 0 < t < ``t_max`` (Möller–Trumbore, in
@@ -447,7 +447,7 @@ def front_hit(ox, oy, oz, dx, dy, dz, tv, t_max):
     return t, cos_l
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def vertex_normal(vn, tri, b1, b2):
     """The vertex normals of ``tri`` interpolated at (b1, b2) (not normalised)."""
     b0 = 1.0 - b1 - b2
@@ -456,7 +456,7 @@ def vertex_normal(vn, tri, b1, b2):
             b0 * vn[tri, 0, 2] + b1 * vn[tri, 1, 2] + b2 * vn[tri, 2, 2])
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def face_forward(g, dx, dy, dz):
     """The geometric normal turned towards the ray's origin, whether the ray hit the
     front face, and cos θ_g = -d·ng (of the unturned normal)."""
@@ -467,7 +467,7 @@ def face_forward(g, dx, dy, dz):
     return g, front, cos_g
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def shading_normal(n, g, dx, dy, dz):
     """Unit interpolated normal ``n`` on g's side; g itself where it would face away from
     the ray (d·n ≥ -1e-6)."""
@@ -481,14 +481,14 @@ def shading_normal(n, g, dx, dy, dz):
     return nx, ny, nz
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def offset_point(p, g, eps, side):
     """p moved by ``eps`` along the unit geometric normal ``g``, to its side ``side`` = ±1
     (ε from :func:`scene.geometry.ray_offset_at`)."""
     return (p[0] + g[0] * eps * side, p[1] + g[1] * eps * side, p[2] + g[2] * eps * side)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def shadow_ray(p, g, eps, target, wi, finite):
     """The shadow ray of NEE from the hit p (normal g, offset ε): (origin, unit direction,
     length) towards ``target`` for a finite light (shortened by 1e-4 of its length so as
@@ -578,7 +578,7 @@ def frame_change(D, shift, beam):
     return (D * D * D * D * D if beam else 1.0), (math.log(D) * INV_DLOG if shift else 0.0)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def segment_frame(seg, s):
     """Row ``s`` of the segment table ``seg`` (``KernelScene.seg_f``) as the frame of its
     body: (u's unit direction h, |u|, 1/γ, γ, γ²/(γ+1))."""
@@ -586,7 +586,7 @@ def segment_frame(seg, s):
             seg[s, rf.G], seg[s, rf.C])
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def enter_frame(dx, dy, dz, h, b, ig, pend, shift, beam):
     """A lab ray (unit d) hits a body of velocity u = b h (1/γ = ``ig``): its direction in
     S_u (float32), the throughput factor D_u⁵ (``beam``) and the lanes' shift into S_u
@@ -598,7 +598,7 @@ def enter_frame(dx, dy, dz, h, b, ig, pend, shift, beam):
     return np.float32(rx), np.float32(ry), np.float32(rz), k5, cols
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def leave_frame(w, h, b, ig, beam):
     """A continuation w sampled in a moving body's rest frame S_u (u = b h, 1/γ = ``ig``),
     turned back into the lab: (its lab direction, D_out = γ (1 + u·w), the throughput
@@ -608,7 +608,7 @@ def leave_frame(w, h, b, ig, beam):
     return (wlx, wly, wlz), d_out, k5
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def rest_point(seg, s, p, t):
     """The lab event (t, p) in the rest frame of segment ``s`` of ``seg``, as a point of its
     group's BVH coordinates (:func:`to_rest`)."""
@@ -631,7 +631,7 @@ def pending_shift(lamu, pend):
     return lamu + math.log(pend) * INV_DLOG
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def nee_factors(wo, wi, n, g, p_l, scale, delta, ok, wd, wm, a2):
     """The BSDF and MIS factors of a light sample (:func:`lights.sample_light`'s ``wi``,
     ``p_l``, ``scale``, ``delta``, ``ok``) at a hit with shading normal ``n`` and geometric

@@ -82,7 +82,7 @@ from typing import Any
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import FAST_MATH, njit
 from ..physics.relativity import aberrate_doppler_lane
 from ..physics.rgb_table import doppler_columns, lambda_of_grid_column
 from ..scene.geometry import ray_offset_at
@@ -115,7 +115,6 @@ from .environment import (
     uv_of,
 )
 from .integrator import (
-    FAST_MATH,
     REC_AREA,
     REC_E1,
     REC_E2,
@@ -211,7 +210,7 @@ def fill_packet(ray, path, hit, hitf, valid):  # pragma: no cover - compiled
         valid[lane] = -1 if path[lane] >= 0 else 0
 
 
-@njit(nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**_LANES)
 def lane_lerp(table, row, i, f):  # pragma: no cover - compiled
     """:func:`.integrator.lerp` with unsigned indices: table[row, i] (1 - f) +
     table[row, i + 1] f. numba turns a negative signed index into one from the end, and
@@ -223,7 +222,7 @@ def lane_lerp(table, row, i, f):  # pragma: no cover - compiled
     return a + f * (table[r, c + np.uint64(1)] - a)
 
 
-@njit(nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**_LANES)
 def record_point(rec, tri, b1, b2):  # pragma: no cover - compiled
     """A hit's triangle from its record (:func:`.integrator.triangle_records`): the point
     v0 + b1 e1 + b2 e2, the unit geometric normal, the area, the light pmf and the
@@ -237,7 +236,7 @@ def record_point(rec, tri, b1, b2):  # pragma: no cover - compiled
             rec[tri, REC_AREA], rec[tri, REC_PMF], np.uint64(rec[tri, REC_MAT]))
 
 
-@njit(nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**_LANES)
 def prefetch_hits(rec, path, hit):  # pragma: no cover - compiled
     """Prefetch the packed record (:func:`.integrator.triangle_records`) of each lane's
     hit triangle: :func:`shade_hits` gathers them after :func:`bounce_numbers`, whose

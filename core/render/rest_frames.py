@@ -35,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import INLINE, njit
 from ..scene.worldlines import Segment
 from .accel import MISS_DISTANCE, Accel, Hits, as_rays
 from .embree import intersect1, occluded1, rayhit_buffer
@@ -123,7 +123,7 @@ def rest_ray(ox, oy, oz, dx, dy, dz, t, best, sf, s):  # pragma: no cover - comp
     return kept, sx, sy, sz, bx, by, bz, lo, length
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
+@njit(**INLINE)
 def meets_box(ox, oy, oz, dx, dy, dz, s_max, lo, hi):  # pragma: no cover - compiled
     """Whether the segment o + s d, 0 < s < s_max, meets the box [lo, hi] (slab test in
     float64; a ray along a slab's plane meets it only if its origin lies between the
@@ -150,7 +150,7 @@ def meets_box(ox, oy, oz, dx, dy, dz, s_max, lo, hi):  # pragma: no cover - comp
     return True
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True)
+@njit(**INLINE)
 def reaches_box(sf, s, sx, sy, sz, bx, by, bz, length):  # pragma: no cover - compiled
     """Whether segment ``s``'s rest-frame ray (:func:`rest_ray`: start, B, lab length)
     meets its group's bounding box (BVH coordinates, ``LO``, ``HI`` of ``sf``) before

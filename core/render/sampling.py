@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import INLINE, njit
 
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
@@ -75,14 +75,14 @@ DIMS_PER_BOUNCE = 8
 """Dimensions per bounce (1, 2, 5 and 7 are spare)."""
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def bounce_dim(depth, offset):
     """The dimension of ``offset`` (``DIM_LIGHT`` ...) at bounce ``depth`` (0: the camera
     ray's hit)."""
     return DIMS_CAMERA + depth * DIMS_PER_BOUNCE + offset
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def mix64(z):
     """SplitMix64 finaliser: a bijective avalanche hash of a uint64."""
     z = (z ^ (z >> _S30)) * _M1
@@ -90,7 +90,7 @@ def mix64(z):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def hash32(x):
     """A bijective avalanche hash of a 32-bit word (in a uint64; Wellons' lowbias32)."""
     x = x & _MASK32
@@ -126,7 +126,7 @@ def path_keys(seed, frame, pixels, samples, out=None):
     return out
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def rand(key, dim):
     """Uniform float32 in [0, 1) for dimension ``dim`` of the path with ``key``."""
     x = mix64(key + np.uint64(dim + 1) * _GOLDEN)
@@ -145,7 +145,7 @@ _LK = (np.uint64(0x6C50B47C), np.uint64(0xB82F1E52), np.uint64(0xC7AFE638),
        np.uint64(0x8D22F6E6))
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def reverse32(x):
     """The 32 low bits of x in reverse order."""
     x = ((x >> _U1) & _R1) | ((x & _R1) << _U1)
@@ -155,7 +155,7 @@ def reverse32(x):
     return ((x >> _S16) | (x << _S16)) & _MASK32
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def laine_karras(x, seed):
     """A random permutation of 32-bit words in which bit k depends only on bits ≤ k.
 
@@ -171,7 +171,7 @@ def laine_karras(x, seed):
     return x
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def sobol1_reversed(i):
     """Sobol's dimension 1 of a 32-bit index i, bit-reversed: bit j of the result is the
     fraction's digit of weight 2^-(j+1).
@@ -191,13 +191,13 @@ def sobol1_reversed(i):
     return i ^ (i >> _S16)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def _dim_seeds(key, dim):
     h = mix64((key >> _S32) * _GOLDEN + np.uint64(dim + 1) * _M2)
     return h & _MASK32, h >> _S32
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def sobol2(key, dim):
     """The Owen-scrambled, shuffled Sobol point (u1, u2) ∈ [0,1)² of a path (float64).
 
@@ -211,7 +211,7 @@ def sobol2(key, dim):
     return np.float64(x) * _INV32, np.float64(y) * _INV32
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def sobol1(key, dim):
     """The Owen-scrambled, shuffled van der Corput number of dimension ``dim`` (float64)."""
     h_shuffle, h_x = _dim_seeds(key, dim)
@@ -237,7 +237,7 @@ def rand_dims(keys, dim):
     return out
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def onb(nx, ny, nz):
     """An orthonormal basis (t, b) perpendicular to unit n (Duff et al. 2017)."""
     s = 1.0 if nz >= 0.0 else -1.0
@@ -250,7 +250,7 @@ _HALF_PI = 0.5 * math.pi
 _SQRT_HALF = math.sqrt(0.5)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def sincos_2pi(u):
     """(cos 2πu, sin 2πu) for u ∈ [0, 1), to about 4e-16, without libm's sincos.
 
@@ -281,7 +281,7 @@ def sincos_2pi(u):
     return sign * c, sign * s
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def cosine_hemisphere(u1, u2):
     """Local direction (x, y, z) with z ≥ 0 and pdf cos θ / π."""
     r = math.sqrt(u1)
@@ -289,7 +289,7 @@ def cosine_hemisphere(u1, u2):
     return r * c, r * s, math.sqrt(max(0.0, 1.0 - u1))
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def uniform_sphere(u1, u2):
     """Unit direction with pdf 1/(4π)."""
     z = 1.0 - 2.0 * u1
@@ -298,14 +298,14 @@ def uniform_sphere(u1, u2):
     return r * c, r * s, z
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def uniform_triangle(u1, u2):
     """Barycentrics (b1, b2) of a uniform point on a triangle (pdf 1/area)."""
     su = math.sqrt(u1)
     return su * (1.0 - u2), su * u2
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def to_world(x, y, z, t, b, nx, ny, nz):
     """Local (x, y, z) in the frame (t, b, n) -> world vector."""
     return (x * t[0] + y * b[0] + z * nx,
@@ -313,7 +313,7 @@ def to_world(x, y, z, t, b, nx, ny, nz):
             x * t[2] + y * b[2] + z * nz)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def rescale_uniform(u, lo, width):
     """A uniform u known to lie in [lo, lo + width), mapped back to [0, 1): (u - lo)/width
     (below 1; 0 for an empty interval). A discrete choice made with u thus leaves a
@@ -321,7 +321,7 @@ def rescale_uniform(u, lo, width):
     return min((u - lo) / width, ONE_MINUS) if width > 0.0 else 0.0
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def power_heuristic(pa, pb):
     """Veach's power heuristic (β = 2): pa² / (pa² + pb²)."""
     a = pa * pa

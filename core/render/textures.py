@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import UserError
-from ..jit import FAST_MATH, njit
+from ..jit import INLINE_FAST, njit
 from ..physics import spectrum
 from ..physics.rgb_table import (  # noqa: F401  (re-exported for the integrator)
     band_coordinate,
@@ -334,7 +334,7 @@ def bounce_spread(spread, alpha, delta):
     return spread + min(alpha, DIFFUSE_SPREAD)
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def wrap_index(i, n, mode):
     """Texel index i wrapped into [0, n): repeat (0), clamp (1), mirror (2); a repeat of
     a power-of-two size n is i & (n - 1) (two's complement: the same as i mod n, without
@@ -363,7 +363,7 @@ def wrap_index(i, n, mode):
 # (triangle_uv, normal_mapped, texel_reflectance, texel_emission): compiled with reference
 # counting, each call counted its array arguments up and down again (6 % of the textured
 # scene's time, perf).
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     """RGBA of texture ``tex`` at level ``level`` at (u, v), bilinear between the four
     nearest texel centres (module docstring)."""
@@ -390,7 +390,7 @@ def texture_bilinear(atlas, desc, level_rows, tex, level, u, v):
     return c0, c1, c2, c3
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def texture_trilinear(atlas, desc, level_rows, tex, lod, u, v):
     """RGBA of texture ``tex`` at (u, v) and the fractional level of detail ``lod``
     (clamped to [0, levels - 1]): linear between the bilinear lookups of the two levels
@@ -417,7 +417,7 @@ def slot_texel(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod,
                          m, slot, u, v, lod_geo)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def slot_texel_of(tt_atlas, tt_desc, tt_rows, mat_tex, mat_uv, mat_factor, mat_lod, m, slot,
                   u, v, lod_geo):
     """The factor-weighted RGBA texel of material m's ``slot`` at the triangle's (u, v)
@@ -448,7 +448,7 @@ def base_texel(atlas, desc, rows, mat_tex, mat_uv, mat_factor, mat_lod, m, u, v,
                               np.int64(BASE), u, v, lod), out)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def base_colour(t, out):
     """A base-colour texel ``t`` (RGBA), each channel clamped to [0, 1], into ``out[:3]``."""
     out[0] = min(max(t[0], 0.0), 1.0)
@@ -465,7 +465,7 @@ def scalar_texel(atlas, desc, rows, mat_tex, mat_ch, mat_uv, mat_factor, mat_lod
                                         mat_lod, m, slot, u, v, lod), mat_ch[m, slot])
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def scalar_channel(t, c):
     """Channel ``c`` of a scalar slot's texel ``t``, clamped to [0, 1]."""
     return min(max(channel(t, c), 0.0), 1.0)
@@ -501,7 +501,7 @@ def triangle_uv(tri_uv, tri, b1, b2):
     return triangle_uv_of(tri_uv, tri, b1, b2)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def triangle_uv_of(tri_uv, tri, b1, b2):
     """The UV at barycentrics (b1, b2) of triangle ``tri`` and its UV edges
     (uv1 - uv0, uv2 - uv0)."""
@@ -527,7 +527,7 @@ def normal_mapped(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     return normal_mapped_of(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m)
 
 
-@njit(cache=True, nogil=True, error_model="numpy", forceinline=True, fastmath=FAST_MATH)
+@njit(**INLINE_FAST)
 def normal_mapped_of(texel, scale, n0, e1, e2, tri, duv1, duv2, mat_uv, m):
     """The normal of a tangent-space normal map's texel (r, g, b) ∈ [0, 1]³ at a hit
     whose interpolated (or geometric) normal is ``n0`` (on the triangle's front side):

@@ -66,7 +66,7 @@ from typing import Any
 
 import numpy as np
 
-from ..jit import njit
+from ..jit import FAST_MATH, INLINE_FAST, njit
 from ..physics.relativity import aberrate_doppler_ray
 from ..physics.spectrum import INV_DLOG
 from ..scene.geometry import ray_offset_at
@@ -82,7 +82,6 @@ from .environment import (
     lane_lambdas,
 )
 from .integrator import (
-    FAST_MATH,
     RR_DEPTH,
     KernelScene,
     body_shadow_ray,
@@ -524,7 +523,7 @@ def _compile(with_env: bool, with_tex: bool, with_moving: bool, record: bool) ->
     return lambert_paths
 
 
-@njit(cache=True, nogil=True, forceinline=True, fastmath=FAST_MATH, error_model="numpy")
+@njit(**INLINE_FAST)
 def lambert_texels(tex, geo, m, tri, b1, b2, cos_g, g, d, cone_w, emits, a, n, alb):
     """The image textures of a Lambert hit (material m, triangle ``tri`` at barycentrics
     (b1, b2); ``g`` the geometric normal turned towards the ray ``d``, cos θ_g of the

@@ -74,7 +74,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
-from ..jit import njit
+from ..jit import INLINE, njit
 from . import gltf, images, shapes, worldlines
 from .description import (
     TEXTURE_ENCODING,
@@ -593,7 +593,7 @@ def ray_offset(extent: float) -> float:
     return max(RAY_OFFSET_REL * extent, RAY_OFFSET_MIN)
 
 
-@njit(cache=True, nogil=True, forceinline=True, error_model="numpy")
+@njit(**INLINE)
 def ray_offset_at(base, px, py, pz):
     """The ray offset ε(p) at the point (px, py, pz) (accelerator coordinates), given the
     scene's part ``base`` (:func:`ray_offset`): base + RAY_OFFSET_POINT · max_i |p_i|."""
