@@ -70,7 +70,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..jit import INLINE_FAST, njit
+from ..jit import INLINE_IR, njit
 from ..physics import spectrum
 from ..physics.rgb_table import coefficients, lambda_of_column, sigmoid_reflectance
 from ..physics.spectrum import guide_table, guided_bin
@@ -244,7 +244,7 @@ def kernel_environment(image: EnvironmentImage | None, mode: str, row: int) -> K
 # the map 250 -> 175 ns, a light sample 185 -> 140 ns).
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def uv_of(x, y, z, rot):
     """Map coordinates (u, v) ∈ [0, 1)² × [0, 1] of the unit lab direction (x, y, z)
     (polynomial ``acos``/``atan2``, :mod:`.arcs`: straight-line code that the SIMD lanes
@@ -261,7 +261,7 @@ def direction_to_uv(x, y, z, rot):
     return uv_of(x, y, z, rot)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def direction_of(u, v, rot):
     """The unit lab direction of map coordinates (u, v) and its sin θ: θ = π(1 − v),
     φ = π + ρ − 2πu, by :func:`.sampling.sincos_2pi` of θ/2π and φ/2π (mod 1)."""
@@ -285,7 +285,7 @@ def env_bilinear(tex, rot, x, y, z):
     return bilinear_of(tex.shape[0], tex.shape[1], u, v)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def bilinear_of(h, w, u, v):
     """The 2 × 2 texels of an H × W map around the map coordinates (u, v) ∈ [0, 1]² and
     their weights (texel centres at ((c + ½)/W, (r + ½)/H); columns wrap around, rows
@@ -337,19 +337,19 @@ def env_bilinear_at(tex, q, rgb, nm, lam, base):
     return _mix(a, b, fy)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def _mix(a, b, f):
     """:func:`mix` per lane of two 4-tuples."""
     return (mix(a[0], b[0], f), mix(a[1], b[1], f), mix(a[2], b[2], f), mix(a[3], b[3], f))
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def mix(a, b, f):
     """(1 − f) a + f b: the bilinear lookup's blend (:func:`env_bilinear_at`)."""
     return (1.0 - f) * a + f * b
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def lane_lambdas(lamu, rgb):
     """λ (nm) of the four lanes' table columns (rgb lanes: unused zeros)."""
     if rgb:
@@ -358,7 +358,7 @@ def lane_lambdas(lamu, rgb):
             lambda_of_column(lamu[2]), lambda_of_column(lamu[3]))
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def _texel_lanes(tex, r, c, rgb, nm, lam, base):
     """:func:`env_lanes` of texel (r, c) at the lanes' wavelengths ``lam`` (nm)."""
     if rgb:
@@ -373,7 +373,7 @@ def _texel_lanes(tex, r, c, rgb, nm, lam, base):
             row_value(row, False, 2, lam[2], base[2]), row_value(row, False, 3, lam[3], base[3]))
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def row_value(row, rgb, j, lam, base):
     """Lane ``j``'s radiance of a colour map's texel whose (c0, c1, c2, k) (rgb mode
     (r, g, b, 1)) are ``row`` (the SIMD lanes' form of :func:`env_lanes`, no bands): the
@@ -396,7 +396,7 @@ def band_value(tex, r, c, nm, lam):
     return (1.0 - f) * np.float64(tex[r, c, k - 1]) + f * np.float64(tex[r, c, k])
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def texel_pdf_of(pmf, u, v, z):
     """(row, column, solid-angle density) at map coordinates (u, v) of a lab direction
     whose z component is ``z``: the texel they fall in and p_t H W / (2π² sin θ),
@@ -431,7 +431,7 @@ def _pick(cdf, guide, u):
     return k, place(cdf[k], cdf[k + 1], u)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def place(lo, hi, u):
     """u's place inside the CDF's step [lo, hi): (u − lo)/(hi − lo) (½ for an empty
     step), clamped to [0, 1 − 1e-7]."""
@@ -439,7 +439,7 @@ def place(lo, hi, u):
     return min(max(f, 0.0), 1.0 - 1e-7)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def sample_pdf(pmf, r, c, st):
     """The solid-angle density of :func:`env_sample` at texel (r, c) where sin θ = st:
     p_t H W / (2π² st) (0 at a pole)."""

@@ -82,7 +82,7 @@ from typing import Any
 
 import numpy as np
 
-from ..jit import FAST_MATH, njit
+from ..jit import FAST_MATH, INLINE_IR, njit
 from ..physics.relativity import aberrate_doppler_lane
 from ..physics.rgb_table import doppler_columns, lambda_of_grid_column
 from ..scene.geometry import ray_offset_at
@@ -193,11 +193,13 @@ def applies(sc: KernelScene, accel: object, features: bool) -> bool:
             and (not sc.env_on or len(sc.env_nm) == 0) and len(sc.l_kind) > 0)
 
 
-_LANES = dict(nogil=True, error_model="numpy", fastmath=FAST_MATH, forceinline=True)
-"""The lane loops' compile options: inlined by LLVM into :func:`lane_paths`
-(:mod:`relray.core.jit`), where the lanes' arrays are its own stack memory
+_LANES = {**INLINE_IR, "cache": False}
+"""The lane loops' compile options: numba's IR inlining into :func:`lane_paths`
+(:mod:`relray.core.jit`, "Loops"), where the lanes' arrays are its own stack memory
 (:func:`.stack.stack_array`), so LLVM knows that nothing the loops read from the scene's
-arrays is written by them and vectorises each loop over the lanes."""
+arrays is written by them and vectorises each loop over the lanes. (Inlined by LLVM
+instead, a loop was vectorised alone, its arrays arguments that may alias, or found not
+worth it and marked so: the map's texel loop stayed scalar.)"""
 
 
 @njit(**_LANES)

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..jit import INLINE_FAST, njit
+from ..jit import INLINE_IR, njit
 from ..physics import spectrum
 from .materials import SpectralTables, light_spectrum
 from .sampling import uniform_sphere, uniform_triangle
@@ -175,14 +175,14 @@ def selection_pmf(power: np.ndarray, uniform_share: float = UNIFORM_SHARE) -> np
     return (1.0 - uniform_share) * power / power.sum() + uniform_share / len(power)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def select(cdf, u):
     """The light k with cdf[k] <= u < cdf[k+1], its probability p_sel = cdf[k+1] - cdf[k],
     and cdf[k] (for :func:`sampling.rescale_uniform`: u reused inside the interval)."""
     return selected(cdf, np.searchsorted(cdf, u, side="right"))
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def selected(cdf, count):
     """:func:`select`'s answer given count = #{k: cdf[k] <= u} (its search; the SIMD lanes
     search with a branch-free bisection, :func:`.lane_paths.pick_lights`)."""
@@ -191,7 +191,7 @@ def selected(cdf, count):
     return k, cdf[k + 1] - lo, lo
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def spot_mask(cos_a, cos_half, smooth):
     """Blender's spot cone: smoothstep((cos a - cos(size/2)) / smooth)."""
     if cos_a <= cos_half:
@@ -202,20 +202,20 @@ def spot_mask(cos_a, cos_half, smooth):
     return t * t * (3.0 - 2.0 * t)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def triangle_light_pdf(pmf, area, dist, cos_l):
     """Solid-angle density of NEE towards a point of an emissive triangle seen at
     distance ``dist`` under ``cos_l``: p_sel · dist² / (A |cos θ_y|)."""
     return pmf * dist * dist / (area * abs(cos_l))
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def sky_light_pdf(pmf):
     """Solid-angle density of NEE towards the sky: p_sel / (4π)."""
     return pmf / (4.0 * math.pi)
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot, v0, e1, e2, ng, area,
                  tri_mat, mat_one_sided):
     """Everything :func:`sample_light` needs of light ``k``, read in one straight run
@@ -229,7 +229,7 @@ def light_record(k, l_kind, l_prim, l_pos, l_dir, l_scale, l_spot, v0, e1, e2, n
             mat_one_sided[tri_mat[lt]])
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def sample_triangle(tv0, te1, te2, tng, tarea, one_sided, p_sel, u1, u2, px, py, pz, eps):
     """Next-event estimation from x = (px, py, pz) towards a uniform point y of the
     emissive triangle (v0, e1, e2; unit normal ``tng``, area ``tarea``) picked with
@@ -252,7 +252,7 @@ def sample_triangle(tv0, te1, te2, tng, tarea, one_sided, p_sel, u1, u2, px, py,
     return (wix, wiy, wiz), p_l, target, ok
 
 
-@njit(**INLINE_FAST)
+@njit(**INLINE_IR)
 def sample_light(light, p_sel, u1, u2, px, py, pz, eps):
     """Next-event estimation from the point x = (px, py, pz) (accelerator coordinates)
     towards ``light`` (:func:`light_record`), picked with probability ``p_sel``, as the
