@@ -36,7 +36,10 @@ the copies stay small. Measured (issue 12, ``bench.ab``, environment-lit scene, 
 spp, 1 thread, 10 alternated pairs): everything ``forceinline`` 1.21× the CPU per path of
 everything ``inline="always"``; with these IR-inlined 0.89× the all-``forceinline``
 code (0.85× for everything IR-inlined), the kernel's LLVM IR 15640 → 12481 lines (its
-42 scalar square roots vector ones), its compile about 17 s longer.
+42 scalar square roots vector ones), its compile about 17 s longer. The cost: every
+kernel that calls these helpers copies their IR, the whole-path and wavefront kernels
+too, so the warm-up from an empty cache took 571 s instead of about 270 s (both with the
+other core busy).
 
 Every other function says ``forceinline=False``: numba lets a callee inherit
 ``forceinline``, ``_nrt`` and ``fastmath`` from whichever function's compilation reaches
@@ -67,8 +70,7 @@ INLINE_FAST: dict[str, Any] = {**INLINE, "fastmath": FAST_MATH}
 #: The options of a helper that the SIMD lanes call inside their loops over the lanes
 #: (module docstring, "Loops"): numba's IR inlining, with the kernels' :data:`FAST_MATH`
 #: where it is called on its own, ``@njit(**INLINE_IR)``.
-INLINE_IR: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy",
-                             "inline": "always", "fastmath": FAST_MATH}
+INLINE_IR: dict[str, Any] = {**INLINE_FAST, "forceinline": False, "inline": "always"}
 
 
 def njit(*args: Any, **options: Any) -> Any:
